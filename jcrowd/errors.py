@@ -1,0 +1,37 @@
+"""The project's one error family.
+
+Every error a user can cause is a :class:`JcrowdError` (a ``ValueError``), so callers can catch
+one type. Messages say what was expected, what was found, and where (``path:line`` for files,
+a key path for scenarios).
+"""
+
+from __future__ import annotations
+
+import os
+
+__all__ = ["BVHError", "DataError", "JcrowdError", "MotionError", "SkeletonError", "where"]
+
+
+class JcrowdError(ValueError):
+    """Base class of every error jcrowd raises for bad input."""
+
+
+class BVHError(JcrowdError):
+    """A BVH file could not be read or written."""
+
+
+class SkeletonError(JcrowdError):
+    """A skeleton's topology or offsets are invalid."""
+
+
+class MotionError(JcrowdError):
+    """A motion clip cannot be processed as asked (too short, no feet found, ...)."""
+
+
+class DataError(JcrowdError):
+    """A dataset folder or its labels file is invalid."""
+
+
+def where(path: str | os.PathLike[str], line: int | None = None) -> str:
+    """Format a location as ``path:line`` (or just ``path``) for error messages."""
+    return f"{os.fspath(path)}:{line}" if line is not None else os.fspath(path)

@@ -1,0 +1,1 @@
+"""File formats: BVH motion files (:mod:`jcrowd.io.bvh`) and, later, model files."""

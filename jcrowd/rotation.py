@@ -1,0 +1,299 @@
+"""Rotations: unit quaternions (w, x, y, z), matrices, exp maps, slerp and BVH Euler angles.
+
+Conventions (DESIGN §3):
+
+- A quaternion is ``(w, x, y, z)`` with unit length; ``q`` and ``-q`` are the same rotation.
+- ``quat_mul(a, b)`` is the rotation "first ``b``, then ``a``" (matrix product ``A @ B``).
+- Rotations act on column vectors: ``v' = R v``.
+- An exp map (rotation vector) is ``axis * angle`` with the angle in radians (papers 000, 001 store
+  rotations this way in pose vectors).
+- Euler angles exist for BVH only. A BVH channel list such as ``Zrotation Yrotation Xrotation``
+  means ``R = Rz(z) @ Ry(y) @ Rx(x)`` (intrinsic, in the listed order) — the same as SciPy's
+  ``Rotation.from_euler("ZYX", [z, y, x])``. Angles are radians here; degrees live in ``io/bvh``.
+
+Every function works on arrays with any leading batch axes. It returns NumPy arrays (keeping
+float64) when every input is a NumPy array or a Python number, and ``jax.numpy`` arrays
+otherwise, so the same code serves the NumPy-only BVH reader, float64 oracles and jit-compiled
+kernels.
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = [
+    "EULER_ORDERS",
+    "euler_to_quat",
+    "quat_angle",
+    "quat_canonical",
+    "quat_conj",
+    "quat_from_axis_angle",
+    "quat_from_expmap",
+    "quat_from_matrix",
+    "quat_identity",
+    "quat_inv",
+    "quat_mul",
+    "quat_normalize",
+    "quat_rotate",
+    "quat_slerp",
+    "quat_to_euler",
+    "quat_to_expmap",
+    "quat_to_matrix",
+    "quat_yaw",
+    "yaw_quat",
+]
+
+EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
+"""The six Tait–Bryan orders BVH files use (each axis once)."""
+
+_AXIS = {"X": 0, "Y": 1, "Z": 2}
+
+
+def _xp(*arrays: Any) -> ModuleType:
+    """NumPy when every input is NumPy (or a plain number), else jax.numpy."""
+    if all(isinstance(a, np.ndarray | np.generic | float | int) for a in arrays):
+        return np
+    return jnp
+
+
+def _stack(xp: ModuleType, parts: list[Any]) -> Any:
+    return xp.stack(parts, axis=-1)
+
+
+def quat_identity(shape: tuple[int, ...] = (), dtype: Any = jnp.float32) -> jnp.ndarray:
+    """Identity quaternions of the given batch shape, ``(*shape, 4)``."""
+    return jnp.zeros((*shape, 4), dtype).at[..., 0].set(1.0)
+
+
+def quat_mul(a: Any, b: Any) -> Any:
+    """Hamilton product ``a ⊗ b`` (apply ``b`` first, then ``a``). Shapes ``(..., 4)``."""
+    xp = _xp(a, b)
+    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return _stack(
+        xp,
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+    )
+
+
+def quat_conj(q: Any) -> Any:
+    """Conjugate ``(w, -x, -y, -z)``."""
+    xp = _xp(q)
+    return xp.concatenate([q[..., :1], -q[..., 1:]], axis=-1)
+
+
+def quat_inv(q: Any) -> Any:
+    """Inverse of a unit quaternion (its conjugate)."""
+    return quat_conj(q)
+
+
+def quat_normalize(q: Any, eps: float = 1e-12) -> Any:
+    """Scale to unit length; a zero quaternion becomes the identity rather than NaN."""
+    xp = _xp(q)
+    n = xp.sqrt(xp.sum(q * q, axis=-1, keepdims=True))
+    ident = xp.zeros_like(q) + xp.asarray([1.0, 0.0, 0.0, 0.0], dtype=q.dtype)
+    safe = xp.where(n > eps, n, 1.0)
+    return xp.where(n > eps, q / safe, ident)
+
+
+def quat_canonical(q: Any) -> Any:
+    """The representative with ``w >= 0`` (``q`` and ``-q`` are the same rotation)."""
+    xp = _xp(q)
+    return xp.where(q[..., :1] < 0, -q, q)
+
+
+def quat_rotate(q: Any, v: Any) -> Any:
+    """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)``: ``R v``."""
+    xp = _xp(q, v)
+    w = q[..., :1]
+    u = q[..., 1:]
+    t = 2.0 * xp.cross(u, v)
+    return v + w * t + xp.cross(u, t)
+
+
+def quat_to_matrix(q: Any) -> Any:
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``."""
+    xp = _xp(q)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    rows = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
+    return xp.stack([xp.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def quat_from_matrix(m: Any) -> Any:
+    """Unit quaternions (``w >= 0``) of rotation matrices ``(..., 3, 3)``.
+
+    Shepperd's method: of the four candidate formulas, use the one whose pivot
+    (``1 + trace`` or ``1 + 2 m_ii - trace``) is largest, so no division by a small number.
+    """
+    xp = _xp(m)
+    m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
+    tr = m00 + m11 + m22
+    pivots = xp.stack([1 + tr, 1 + 2 * m00 - tr, 1 + 2 * m11 - tr, 1 + 2 * m22 - tr], axis=-1)
+    k = xp.argmax(pivots, axis=-1)
+    # Each candidate is 4x a quaternion scaled by its pivot's square root.
+    c0 = xp.stack(
+        [1 + tr, m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]],
+        axis=-1,
+    )
+    c1 = xp.stack(
+        [m[..., 2, 1] - m[..., 1, 2], 1 + 2 * m00 - tr, m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0]],
+        axis=-1,
+    )
+    c2 = xp.stack(
+        [m[..., 0, 2] - m[..., 2, 0], m[..., 0, 1] + m[..., 1, 0], 1 + 2 * m11 - tr, m[..., 1, 2] + m[..., 2, 1]],
+        axis=-1,
+    )
+    c3 = xp.stack(
+        [m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1], 1 + 2 * m22 - tr],
+        axis=-1,
+    )
+    cands = xp.stack([c0, c1, c2, c3], axis=-2)
+    idx = k[..., None, None]
+    chosen = xp.take_along_axis(cands, xp.broadcast_to(idx, (*k.shape, 1, 4)), axis=-2)[..., 0, :]
+    return quat_canonical(quat_normalize(chosen))
+
+
+def quat_from_axis_angle(axis: Any, angle: Any) -> Any:
+    """Rotation by ``angle`` (radians) about unit ``axis`` ``(..., 3)``."""
+    xp = _xp(axis, angle)
+    half = 0.5 * xp.asarray(angle)[..., None]
+    return xp.concatenate([xp.cos(half), xp.sin(half) * axis], axis=-1)
+
+
+def quat_from_expmap(r: Any) -> Any:
+    """Quaternion of a rotation vector ``r = axis * angle`` ``(..., 3)``.
+
+    Uses ``sin(θ/2)/θ`` with its Taylor series near 0, so it is smooth (and differentiable) at 0.
+    """
+    xp = _xp(r)
+    theta2 = xp.sum(r * r, axis=-1, keepdims=True)
+    small = theta2 < 1e-8
+    theta = xp.sqrt(xp.where(small, 1.0, theta2))
+    s = xp.where(small, 0.5 - theta2 / 48.0, xp.sin(0.5 * theta) / theta)
+    c = xp.where(small, 1.0 - theta2 / 8.0, xp.cos(0.5 * theta))
+    return xp.concatenate([c, s * r], axis=-1)
+
+
+def quat_to_expmap(q: Any) -> Any:
+    """Rotation vector ``axis * angle`` of ``q``; the angle is in ``[0, π]`` (``w >= 0`` side)."""
+    xp = _xp(q)
+    q = quat_canonical(q)
+    v = q[..., 1:]
+    s2 = xp.sum(v * v, axis=-1, keepdims=True)
+    small = s2 < 1e-12
+    s = xp.sqrt(xp.where(small, 1.0, s2))
+    angle = 2.0 * xp.arctan2(s, q[..., :1])
+    scale = xp.where(small, 2.0 / xp.maximum(q[..., :1], 1e-12), angle / s)
+    return scale * v
+
+
+def quat_angle(a: Any, b: Any) -> Any:
+    """Angle in radians ``[0, π]`` of the rotation taking ``b`` to ``a`` (sign-invariant)."""
+    xp = _xp(a, b)
+    d = xp.abs(xp.sum(a * b, axis=-1))
+    return 2.0 * xp.arccos(xp.clip(d, 0.0, 1.0))
+
+
+def quat_slerp(a: Any, b: Any, t: Any) -> Any:
+    """Spherical linear interpolation from ``a`` (t=0) to ``b`` (t=1) along the short arc."""
+    xp = _xp(a, b, t)
+    t = xp.asarray(t)
+    if t.ndim < a.ndim:
+        t = t[..., None]
+    d = xp.sum(a * b, axis=-1, keepdims=True)
+    b = xp.where(d < 0, -b, b)
+    d = xp.abs(d)
+    near = d > 0.9995
+    omega = xp.arccos(xp.clip(d, -1.0, 1.0))
+    so = xp.sin(xp.where(near, 1.0, omega))
+    wa = xp.where(near, 1.0 - t, xp.sin((1.0 - t) * omega) / so)
+    wb = xp.where(near, t, xp.sin(t * omega) / so)
+    return quat_normalize(wa * a + wb * b)
+
+
+def euler_to_quat(angles: Any, order: str) -> Any:
+    """Quaternion of Euler angles (radians) in BVH channel order.
+
+    Args:
+        angles: ``(..., 3)``, the angle of each axis in the order the letters of ``order`` give.
+        order: one of :data:`EULER_ORDERS`, e.g. ``"ZYX"`` means ``R = Rz @ Ry @ Rx``.
+    """
+    order = _check_order(order)
+    xp = _xp(angles)
+    q = None
+    for i, letter in enumerate(order):
+        axis = np.zeros(3)
+        axis[_AXIS[letter]] = 1.0
+        axis_arr = xp.asarray(axis, dtype=angles.dtype)
+        qi = quat_from_axis_angle(xp.broadcast_to(axis_arr, (*angles.shape[:-1], 3)), angles[..., i])
+        q = qi if q is None else quat_mul(q, qi)
+    return q
+
+
+def quat_to_euler(q: Any, order: str) -> Any:
+    """Euler angles (radians, ``(..., 3)`` in the letters' order) with ``R = R_i R_j R_k``.
+
+    For axes ``(i, j, k)`` and ``s = +1`` for a cyclic order (XYZ, YZX, ZXY), ``-1`` otherwise:
+    ``b = asin(s R[i,k])``, ``a = atan2(-s R[j,k], R[k,k])``, ``c = atan2(-s R[i,j], R[i,i])``.
+    At gimbal lock (``|cos b| ≈ 0``) ``c`` is set to 0 and ``a`` absorbs the whole rotation about
+    the shared axis, which reproduces the same matrix.
+    """
+    order = _check_order(order)
+    xp = _xp(q)
+    i, j, k = (_AXIS[c] for c in order)
+    s = 1.0 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
+    m = quat_to_matrix(q)
+    sb = xp.clip(s * m[..., i, k], -1.0, 1.0)
+    b = xp.arcsin(sb)
+    a = xp.arctan2(-s * m[..., j, k], m[..., k, k])
+    c = xp.arctan2(-s * m[..., i, j], m[..., i, i])
+    # Gimbal lock: R[j,k], R[k,k], R[i,j], R[i,i] all vanish. With c = 0, R = R_i(a) R_j(±π/2)
+    # and a is read from the j-th column's rotation about axis i: a = atan2(R[k,j], R[j,j]).
+    locked = xp.abs(sb) > 1.0 - 1e-7
+    a_locked = xp.arctan2(s * m[..., k, j], m[..., j, j])
+    a = xp.where(locked, a_locked, a)
+    c = xp.where(locked, 0.0, c)
+    return xp.stack([a, b, c], axis=-1)
+
+
+def _check_order(order: str) -> str:
+    up = order.upper()
+    if up not in EULER_ORDERS:
+        from jcrowd.errors import JcrowdError
+
+        raise JcrowdError(f"Euler order: expected one of {EULER_ORDERS}, found {order!r}")
+    return up
+
+
+def quat_yaw(q: Any, forward: Any = None) -> Any:
+    """Heading angle (radians) of ``q`` about +Y: ``atan2(f_x, f_z)`` of the rotated forward.
+
+    ``forward`` is the rest-pose facing direction (default +Z). A positive yaw turns +Z towards
+    +X, i.e. to the character's left when it faces +Z (right-handed, Y up).
+    """
+    xp = _xp(q) if forward is None else _xp(q, forward)
+    if forward is None:
+        forward = xp.asarray([0.0, 0.0, 1.0], dtype=q.dtype)
+    f = quat_rotate(q, xp.broadcast_to(forward, (*q.shape[:-1], 3)))
+    return xp.arctan2(f[..., 0], f[..., 2])
+
+
+def yaw_quat(yaw: Any) -> Any:
+    """Rotation by ``yaw`` radians about +Y, ``(..., 4)``."""
+    xp = _xp(yaw)
+    yaw = xp.asarray(yaw)
+    zero = xp.zeros_like(yaw)
+    return xp.stack([xp.cos(0.5 * yaw), zero, xp.sin(0.5 * yaw), zero], axis=-1)

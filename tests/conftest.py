@@ -1,0 +1,66 @@
+"""Shared test fixtures: where the CMU captures are, and strict JAX settings.
+
+Tests that need the captures take the ``cmu_dir`` / ``cmu16_dir`` fixtures. They look at
+``$JCROWD_DATA`` (the folder holding ``cmu/`` and ``cmu16/``, or ``cmu/`` itself) and then at
+``../shared/data`` beside the checkout. When the data is absent the test is skipped with that
+reason (a user's fresh clone), unless ``JCROWD_REQUIRE_DATA=1`` (set by ``.ci/run``), which makes
+the absence a failure so CI always runs them.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import jax
+import pytest
+
+jax.config.update("jax_numpy_dtype_promotion", "strict")
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _data_root() -> Path | None:
+    env = os.environ.get("JCROWD_DATA")
+    candidates = []
+    if env:
+        p = Path(env)
+        candidates += [p, p.parent] if p.name == "cmu" else [p]
+    candidates.append(ROOT.parent / "shared" / "data")
+    for c in candidates:
+        if (c / "cmu").is_dir():
+            return c
+    return None
+
+
+def _need(sub: str) -> Path:
+    root = _data_root()
+    if root is None or not (root / sub).is_dir():
+        msg = (
+            f"CMU captures not found ({sub}/ under $JCROWD_DATA or ../shared/data); "
+            "set JCROWD_DATA to the folder holding cmu/ and cmu16/"
+        )
+        if os.environ.get("JCROWD_REQUIRE_DATA") == "1":
+            pytest.fail(msg + " — JCROWD_REQUIRE_DATA=1 makes this a failure")
+        pytest.skip(msg)
+    return root / sub
+
+
+@pytest.fixture(scope="session")
+def cmu_dir() -> Path:
+    """``.../data/cmu`` (31-joint skeleton, 120 fps, CMU units, T-pose at frame 0)."""
+    return _need("cmu")
+
+
+@pytest.fixture(scope="session")
+def cmu16_dir() -> Path:
+    """``.../data/cmu16`` (19-joint skeleton, 30 fps, centimetres, CRLF, no T-pose)."""
+    return _need("cmu16")
+
+
+def all_clip_paths() -> list[Path]:
+    """Every shared BVH clip (for parametrised tests); empty when the data is absent."""
+    root = _data_root()
+    if root is None:
+        return []
+    return sorted((root / "cmu").rglob("*.bvh")) + sorted((root / "cmu16").glob("*.bvh"))
