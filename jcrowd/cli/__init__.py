@@ -1,0 +1,69 @@
+"""The ``jcrowd`` command line: parses arguments, calls the library, writes files.
+
+Every subcommand takes ``--json`` and then prints exactly one JSON object on stdout; logs and
+progress bars go to stderr. A :class:`~jcrowd.errors.JcrowdError` becomes a one-line message on
+stderr (and ``{"error": {...}}`` on stdout under ``--json``) with exit status 2; nothing else is
+caught, so a bug still shows its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from jcrowd import __version__
+from jcrowd.errors import JcrowdError
+
+__all__ = ["main"]
+
+Handler = Callable[[argparse.Namespace], dict[str, Any]]
+
+
+def _build_parser() -> tuple[argparse.ArgumentParser, dict[str, Handler]]:
+    from jcrowd.cli import inspect as inspect_cmd
+
+    parser = argparse.ArgumentParser(
+        prog="jcrowd",
+        description="Crowds whose motion is synthesized from motion capture.",
+    )
+    parser.add_argument("--version", action="version", version=f"jcrowd {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    handlers: dict[str, Handler] = {}
+    for module in (inspect_cmd,):
+        p = module.add_parser(sub)
+        p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+        handlers[p.prog.split()[-1]] = module.run
+    return parser, handlers
+
+
+def emit(result: dict[str, Any], as_json: bool, render: Callable[[dict[str, Any]], None]) -> None:
+    """Print ``result`` as one JSON object, or hand it to a human-readable renderer."""
+    if as_json:
+        sys.stdout.write(json.dumps(result, indent=2, allow_nan=False) + "\n")
+    else:
+        render(result)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``jcrowd`` console script; returns the exit status."""
+    parser, handlers = _build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help(sys.stderr)
+        return 2
+    try:
+        handlers[args.command](args)
+    except JcrowdError as err:
+        sys.stderr.write(f"jcrowd {args.command}: error: {err}\n")
+        if getattr(args, "json", False):
+            payload = {"error": {"type": type(err).__name__, "message": str(err)}}
+            sys.stdout.write(json.dumps(payload) + "\n")
+        return 2
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
