@@ -1,14 +1,19 @@
 """Foot contacts, gait cycles and their control parameters (DESIGN §4.2–4.3; paper 004 §4.2).
 
 A *gait cycle* (one sample of the motion model) is two steps: it starts at a left heel strike
-and ends at the next left heel strike, with exactly one right heel strike in between.
+and ends at the next left heel strike, with exactly one right heel strike in between
+(DESIGN §4.2). A cycle that starts at a *right* heel strike is the same thing for the mirrored
+clip; :func:`gait_cycles` can list those too (``foot="both"``), which ``jcrowd inspect`` does so
+that a short clip shows all the two-step cycles it holds. The fit takes left-started cycles
+and gets the right-started ones by mirroring, so nothing is counted twice.
 
 Foot contacts are found per foot from two joints, the ankle ("heel") and the toe, on any
 skeleton: the joints are picked by name among left/right pairs (``*foot*``/``*ankle*`` and
 ``*toe*``), falling back to the lowest joint of each side at rest and its parent. A joint is in
-contact while it is near its own planted height (the clip's 5th percentile of its height) and
+contact while it is near its own planted height and
 slow horizontally; entering needs both thresholds at their tight values, leaving needs one at
-its loose value (hysteresis), so noise at a threshold cannot make a contact flicker. A foot is
+its loose value (hysteresis), so noise at a threshold cannot make a contact flicker. The planted
+level is taken locally (the lowest height within ±0.8 s), since captured floors are not level. A foot is
 in contact when either joint is; a *heel strike* is the onset of a foot's contact. Thresholds
 scale with the character's height (defaults are for a 1.75 m person).
 
@@ -67,8 +72,8 @@ class ContactThresholds:
     filled.
     """
 
-    height_on: float = 0.03
-    height_off: float = 0.06
+    height_on: float = 0.04
+    height_off: float = 0.08
     speed_on: float = 0.35
     speed_off: float = 0.7
     min_contact_s: float = 0.06
@@ -82,14 +87,16 @@ class FootContacts:
     left: np.ndarray
     right: np.ndarray
     feet: FootJoints
+    first_strike: int = 1
+    """Onsets before this frame are not strikes: the speeds there rest on one-sided differences."""
 
     @property
     def left_strikes(self) -> np.ndarray:
-        return _onsets(self.left)
+        return _onsets(self.left, self.first_strike)
 
     @property
     def right_strikes(self) -> np.ndarray:
-        return _onsets(self.right)
+        return _onsets(self.right, self.first_strike)
 
     def intervals(self, side: str) -> list[tuple[int, int]]:
         """Contact intervals ``[(first, last), ...]`` (inclusive frames) of ``"left"``/``"right"``."""
@@ -102,8 +109,9 @@ class GaitCycle:
     """One gait cycle (two steps from a left heel strike).
 
     Attributes:
-        start: frame of the left heel strike that opens the cycle.
-        end: frame of the next left heel strike (the cycle spans ``start..end``; ``end`` is
+        foot: ``"left"`` or ``"right"``, the foot whose heel strike opens the cycle.
+        start: frame of the heel strike that opens the cycle.
+        end: frame of that foot's next heel strike (the cycle spans ``start..end``; ``end`` is
             also the next cycle's ``start``).
         dx, dz: root displacement over the cycle in the start heading frame (m; x left, z forward).
         dyaw: heading change over the cycle (radians, + = left turn).
@@ -112,6 +120,7 @@ class GaitCycle:
         height: the character's standing height (m).
     """
 
+    foot: str
     start: int
     end: int
     dx: float
@@ -156,10 +165,11 @@ def find_feet(skeleton: Skeleton) -> FootJoints:
     return FootJoints(ankle[0], toe[0], ankle[1], toe[1])
 
 
-def _onsets(flags: np.ndarray) -> np.ndarray:
-    """Frames where a contact starts (False → True); frame 0 never counts (its past is unknown)."""
+def _onsets(flags: np.ndarray, first: int = 1) -> np.ndarray:
+    """Frames ``>= first`` where a contact starts (False → True)."""
     f = np.asarray(flags, bool)
-    return np.nonzero(f[1:] & ~f[:-1])[0] + 1
+    on = np.nonzero(f[1:] & ~f[:-1])[0] + 1
+    return on[on >= first]
 
 
 def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
@@ -180,6 +190,20 @@ def _hysteresis(h: np.ndarray, v: np.ndarray, t: ContactThresholds, s: float) ->
     return out
 
 
+def _local_floor(h: np.ndarray, window: int) -> np.ndarray:
+    """The joint's planted height near each frame: the 2nd-lowest value within ±window/2.
+
+    Captured floors are not level (CMU 07_01's planted toe is 3 cm higher at the end than at the
+    start), so one clip-wide floor would miss late contacts. The window spans more than one
+    gait cycle, so it always holds a stance of this foot; the 2nd-lowest value ignores one
+    outlier sample.
+    """
+    half = max(1, window // 2)
+    padded = np.pad(h, half, mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
+    return np.partition(windows, 1, axis=-1)[:, 1]
+
+
 def _clean(flags: np.ndarray, min_len: int, min_gap: int) -> np.ndarray:
     out = flags.copy()
     runs = _runs(out)
@@ -195,6 +219,7 @@ def _clean(flags: np.ndarray, min_len: int, min_gap: int) -> np.ndarray:
 def foot_contacts(motion: Motion, thresholds: ContactThresholds | None = None) -> FootContacts:
     """Contact flags of both feet per frame (see the module docstring for the rule)."""
     t = thresholds or ContactThresholds()
+    floor_window_s = 1.6
     if motion.num_frames < 3:
         raise MotionError(f"foot contacts: expected at least 3 frames, found {motion.num_frames}")
     feet = find_feet(motion.skeleton)
@@ -210,7 +235,7 @@ def foot_contacts(motion: Motion, thresholds: ContactThresholds | None = None) -
         joint_flags = []
         for j in {ankle, toe}:
             p = pos[:, j]
-            h = p[:, 1] - np.percentile(p[:, 1], 5)
+            h = p[:, 1] - _local_floor(p[:, 1], round(floor_window_s * motion.fps))
             xz = np.stack([np.convolve(p[:, k], kernel, mode="same") for k in (0, 2)], axis=-1)
             xz[: win // 2 + 1] = p[: win // 2 + 1][:, [0, 2]]
             xz[-(win // 2 + 1) :] = p[-(win // 2 + 1) :][:, [0, 2]]
@@ -220,46 +245,56 @@ def foot_contacts(motion: Motion, thresholds: ContactThresholds | None = None) -
     min_len = max(1, round(t.min_contact_s * motion.fps))
     min_gap = max(1, round(t.min_gap_s * motion.fps))
     left, right = (_clean(f, min_len, min_gap) for f in flags)
-    return FootContacts(left, right, feet)
+    return FootContacts(left, right, feet, first_strike=max(2, round(0.05 * motion.fps)))
 
 
 def gait_cycles(
     motion: Motion,
     contacts: FootContacts | None = None,
     *,
+    foot: str = "left",
     min_duration: float = 0.5,
     max_duration: float = 2.5,
 ) -> list[GaitCycle]:
-    """Gait cycles of a clip with their control parameters.
+    """Gait cycles of a clip with their control parameters, in order of their start frame.
 
-    A cycle runs from a left heel strike to the next one and is kept when exactly one right
-    heel strike lies in between (two steps) and its duration is within
-    ``[min_duration, max_duration]`` s (a stop, a shuffle or a missed strike is skipped).
+    A cycle runs from a heel strike of ``foot`` (``"left"``, ``"right"`` or ``"both"``) to that
+    foot's next one, and is kept when exactly one strike of the other foot lies in between
+    (two steps) and its duration is within ``[min_duration, max_duration]`` s (a stop, a
+    shuffle or a missed strike is skipped).
 
     ``speed`` is the arc length of a constant-curvature path through the start and end root
     positions with the cycle's heading change, divided by the duration:
     ``|d| · (θ/2) / sin(θ/2) / T`` — the chord alone would under-count turning cycles, and the
     sampled root path would add the pelvis' lateral sway.
     """
+    if foot not in ("left", "right", "both"):
+        raise MotionError(f"gait cycles: expected foot 'left', 'right' or 'both', found {foot!r}")
     c = contacts or foot_contacts(motion)
-    left, right = c.left_strikes, c.right_strikes
     yaw = np.unwrap(np.asarray(headings(motion), np.float64))
     root = np.asarray(motion.root_positions, np.float64)
     height = character_height(motion.skeleton)
+    sides = ("left", "right") if foot == "both" else (foot,)
     cycles = []
-    for a, b in zip(left[:-1], left[1:], strict=True):
-        steps = np.count_nonzero((right > a) & (right < b))
-        duration = (b - a) / motion.fps
-        if steps != 1 or not min_duration <= duration <= max_duration:
-            continue
-        h0 = yaw[a]
-        d = root[b] - root[a]
-        dz = d[0] * np.sin(h0) + d[2] * np.cos(h0)
-        dx = d[0] * np.cos(h0) - d[2] * np.sin(h0)
-        dyaw = yaw[b] - yaw[a]
-        half = 0.5 * abs(dyaw)
-        arc = np.hypot(dx, dz) * (half / np.sin(half) if half > 1e-6 else 1.0)
-        cycles.append(
-            GaitCycle(int(a), int(b), float(dx), float(dz), float(dyaw), float(arc / duration), duration, height)
+    for side in sides:
+        own, other = (
+            (c.left_strikes, c.right_strikes) if side == "left" else (c.right_strikes, c.left_strikes)
         )
-    return cycles
+        for a, b in zip(own[:-1], own[1:], strict=True):
+            steps = np.count_nonzero((other > a) & (other < b))
+            duration = (b - a) / motion.fps
+            if steps != 1 or not min_duration <= duration <= max_duration:
+                continue
+            h0 = yaw[a]
+            d = root[b] - root[a]
+            dz = d[0] * np.sin(h0) + d[2] * np.cos(h0)
+            dx = d[0] * np.cos(h0) - d[2] * np.sin(h0)
+            dyaw = yaw[b] - yaw[a]
+            half = 0.5 * abs(dyaw)
+            arc = np.hypot(dx, dz) * (half / np.sin(half) if half > 1e-6 else 1.0)
+            cycles.append(
+                GaitCycle(
+                    side, int(a), int(b), float(dx), float(dz), float(dyaw), float(arc / duration), duration, height
+                )
+            )
+    return sorted(cycles, key=lambda cy: (cy.start, cy.foot))

@@ -132,9 +132,10 @@ def drop_tpose_frames(motion: Motion, max_frames: int = 3, jump_factor: float = 
         pos[1:, 0] - pos[:-1, 0], axis=-1
     )
     typical = float(np.median(step[min(max_frames, len(step) - 1) :])) + 1e-6
-    dropped = 0
-    while dropped < min(max_frames, f - 2) and step[dropped] > jump_factor * typical:
-        dropped += 1
+    # The last big jump among the first steps ends the junk: CMU 07_12 has a T-pose and then an
+    # all-zero frame, whose mutual difference is small but whose jump into the capture is not.
+    jumps = np.nonzero(step[: min(max_frames, f - 2)] > jump_factor * typical)[0]
+    dropped = int(jumps[-1]) + 1 if len(jumps) else 0
     if dropped == 0:
         return motion, 0
     return slice_frames(motion, dropped, f), dropped

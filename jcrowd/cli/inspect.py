@@ -57,7 +57,7 @@ def inspect_bvh(path: str | Path, scale: float | None = None) -> dict[str, Any]:
     }
     try:
         contacts = foot_contacts(motion)
-        cycles = gait_cycles(motion, contacts)
+        cycles = gait_cycles(motion, contacts, foot="both")
     except JcrowdError as err:  # no feet on this skeleton: report the rest
         result.update(contacts=None, gait_cycles=[], gait_note=str(err))
         return result
@@ -71,6 +71,7 @@ def inspect_bvh(path: str | Path, scale: float | None = None) -> dict[str, Any]:
     }
     result["gait_cycles"] = [
         {
+            "foot": c.foot,
             "start": c.start,
             "end": c.end,
             "duration_s": round(c.duration, 5),
@@ -109,11 +110,12 @@ def _render(result: dict[str, Any]) -> None:
             console.print(f"{side} foot ({feet}) contacts: {ivs or 'none'}")
     else:
         console.print(f"no foot contacts: {result.get('gait_note', '')}")
-    table = Table(title="gait cycles (two steps from a left heel strike)", show_edge=False)
-    for col in ("start", "end", "s", "dx m", "dz m", "dyaw °", "speed m/s"):
+    table = Table(title="gait cycles (two steps from a heel strike)", show_edge=False)
+    for col in ("foot", "start", "end", "s", "dx m", "dz m", "dyaw °", "speed m/s"):
         table.add_column(col, justify="right")
     for c in result["gait_cycles"]:
         table.add_row(
+            c["foot"],
             str(c["start"]),
             str(c["end"]),
             f"{c['duration_s']:.2f}",
