@@ -13,7 +13,8 @@ skeleton: the joints are picked by name among left/right pairs (``*foot*``/``*an
 contact while it is near its own planted height and
 slow horizontally; entering needs both thresholds at their tight values, leaving needs one at
 its loose value (hysteresis), so noise at a threshold cannot make a contact flicker. The planted
-level is taken locally (the lowest height within ±0.8 s), since captured floors are not level. A foot is
+level is taken locally (the lowest height within ±0.8 s), since captured floors are not level.
+A foot is
 in contact when either joint is; a *heel strike* is the onset of a foot's contact. Thresholds
 scale with the character's height (defaults are for a 1.75 m person).
 
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 
@@ -99,7 +101,7 @@ class FootContacts:
         return _onsets(self.right, self.first_strike)
 
     def intervals(self, side: str) -> list[tuple[int, int]]:
-        """Contact intervals ``[(first, last), ...]`` (inclusive frames) of ``"left"``/``"right"``."""
+        """Contact intervals ``[(first, last), ...]`` (inclusive) of ``"left"`` or ``"right"``."""
         flags = self.left if side == "left" else self.right
         return _runs(flags)
 
@@ -207,7 +209,7 @@ def _local_floor(h: np.ndarray, window: int) -> np.ndarray:
 def _clean(flags: np.ndarray, min_len: int, min_gap: int) -> np.ndarray:
     out = flags.copy()
     runs = _runs(out)
-    for (_, a_end), (b_start, _) in zip(runs[:-1], runs[1:], strict=True):
+    for (_, a_end), (b_start, _) in pairwise(runs):
         if b_start - a_end - 1 < min_gap:
             out[a_end + 1 : b_start] = True
     for a, b in _runs(out):
@@ -278,9 +280,11 @@ def gait_cycles(
     cycles = []
     for side in sides:
         own, other = (
-            (c.left_strikes, c.right_strikes) if side == "left" else (c.right_strikes, c.left_strikes)
+            (c.left_strikes, c.right_strikes)
+            if side == "left"
+            else (c.right_strikes, c.left_strikes)
         )
-        for a, b in zip(own[:-1], own[1:], strict=True):
+        for a, b in pairwise(own):
             steps = np.count_nonzero((other > a) & (other < b))
             duration = (b - a) / motion.fps
             if steps != 1 or not min_duration <= duration <= max_duration:
@@ -294,7 +298,15 @@ def gait_cycles(
             arc = np.hypot(dx, dz) * (half / np.sin(half) if half > 1e-6 else 1.0)
             cycles.append(
                 GaitCycle(
-                    side, int(a), int(b), float(dx), float(dz), float(dyaw), float(arc / duration), duration, height
+                    side,
+                    int(a),
+                    int(b),
+                    float(dx),
+                    float(dz),
+                    float(dyaw),
+                    float(arc / duration),
+                    duration,
+                    height,
                 )
             )
     return sorted(cycles, key=lambda cy: (cy.start, cy.foot))

@@ -68,7 +68,9 @@ class Motion(eqx.Module):
         if len(rs) != 3 or rs[1:] != (j, 4):
             raise MotionError(f"motion: expected rotations of shape (F, {j}, 4), found {tuple(rs)}")
         if tuple(ps) != (rs[0], 3):
-            raise MotionError(f"motion: expected root positions of shape ({rs[0]}, 3), found {tuple(ps)}")
+            raise MotionError(
+                f"motion: expected root positions of shape ({rs[0]}, 3), found {tuple(ps)}"
+            )
         if not self.fps > 0:
             raise MotionError(f"motion: expected a positive frame rate, found {self.fps}")
 
@@ -89,7 +91,9 @@ def joint_positions(motion: Motion) -> Any:
 
 def slice_frames(motion: Motion, start: int, stop: int) -> Motion:
     """Frames ``start:stop`` as a new clip."""
-    return Motion(motion.skeleton, motion.rotations[start:stop], motion.root_positions[start:stop], motion.fps)
+    return Motion(
+        motion.skeleton, motion.rotations[start:stop], motion.root_positions[start:stop], motion.fps
+    )
 
 
 def resample(motion: Motion, fps: float) -> Motion:
@@ -111,7 +115,9 @@ def resample(motion: Motion, fps: float) -> Motion:
     return Motion(motion.skeleton, rot, pos, float(fps))
 
 
-def drop_tpose_frames(motion: Motion, max_frames: int = 3, jump_factor: float = 8.0) -> tuple[Motion, int]:
+def drop_tpose_frames(
+    motion: Motion, max_frames: int = 3, jump_factor: float = 8.0
+) -> tuple[Motion, int]:
     """Drop leading frames that do not belong to the captured motion.
 
     Some conversions put a T-pose (CMU's cgspeed release) or an all-zero frame (CMU 07_12) at the
@@ -170,7 +176,9 @@ def normalize_root(motion: Motion) -> Motion:
     xp = _xp(motion.rotations, motion.root_positions)
     yaw0 = headings(motion)[0]
     turn = yaw_quat(-yaw0)
-    start = motion.root_positions[0] * xp.asarray([1.0, 0.0, 1.0], dtype=motion.root_positions.dtype)
+    start = motion.root_positions[0] * xp.asarray(
+        [1.0, 0.0, 1.0], dtype=motion.root_positions.dtype
+    )
     pos = quat_rotate(turn, motion.root_positions - start)
     root = quat_mul(turn, motion.rotations[:, 0])
     rot = xp.concatenate([root[:, None], motion.rotations[:, 1:]], axis=1)
@@ -190,7 +198,7 @@ _SIDE_RULES: tuple[tuple[str, str], ...] = (
 
 
 def _side_pairs(names: tuple[str, ...]) -> list[tuple[int, int]]:
-    """``(left, right)`` index pairs found by name rules that map a left name to an existing right one."""
+    """``(left, right)`` index pairs: a rule maps the left name to an existing right one."""
     index = {n: i for i, n in enumerate(names)}
     pairs: list[tuple[int, int]] = []
     seen: set[int] = set()

@@ -145,19 +145,39 @@ def quat_from_matrix(m: Any) -> Any:
     k = xp.argmax(pivots, axis=-1)
     # Each candidate is 4x a quaternion scaled by its pivot's square root.
     c0 = xp.stack(
-        [1 + tr, m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]],
+        [
+            1 + tr,
+            m[..., 2, 1] - m[..., 1, 2],
+            m[..., 0, 2] - m[..., 2, 0],
+            m[..., 1, 0] - m[..., 0, 1],
+        ],
         axis=-1,
     )
     c1 = xp.stack(
-        [m[..., 2, 1] - m[..., 1, 2], 1 + 2 * m00 - tr, m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0]],
+        [
+            m[..., 2, 1] - m[..., 1, 2],
+            1 + 2 * m00 - tr,
+            m[..., 0, 1] + m[..., 1, 0],
+            m[..., 0, 2] + m[..., 2, 0],
+        ],
         axis=-1,
     )
     c2 = xp.stack(
-        [m[..., 0, 2] - m[..., 2, 0], m[..., 0, 1] + m[..., 1, 0], 1 + 2 * m11 - tr, m[..., 1, 2] + m[..., 2, 1]],
+        [
+            m[..., 0, 2] - m[..., 2, 0],
+            m[..., 0, 1] + m[..., 1, 0],
+            1 + 2 * m11 - tr,
+            m[..., 1, 2] + m[..., 2, 1],
+        ],
         axis=-1,
     )
     c3 = xp.stack(
-        [m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1], 1 + 2 * m22 - tr],
+        [
+            m[..., 1, 0] - m[..., 0, 1],
+            m[..., 0, 2] + m[..., 2, 0],
+            m[..., 1, 2] + m[..., 2, 1],
+            1 + 2 * m22 - tr,
+        ],
         axis=-1,
     )
     cands = xp.stack([c0, c1, c2, c3], axis=-2)
@@ -203,8 +223,18 @@ def quat_to_expmap(q: Any) -> Any:
 def quat_angle(a: Any, b: Any) -> Any:
     """Angle in radians ``[0, π]`` of the rotation taking ``b`` to ``a`` (sign-invariant)."""
     xp = _xp(a, b)
-    d = xp.abs(xp.sum(a * b, axis=-1))
-    return 2.0 * xp.arccos(xp.clip(d, 0.0, 1.0))
+    # 2·arccos|a·b| loses half the digits near 0 (float32: ~1e-3 rad error at small angles).
+    # For unit a, b at 4-D angle Ω: |a - b| = 2 sin(Ω/2), |a + b| = 2 cos(Ω/2), so the rotation
+    # angle 2Ω = 4·atan2(|a - b|, |a + b|), accurate everywhere.
+    b = xp.where(xp.sum(a * b, axis=-1, keepdims=True) < 0, -b, b)
+    return 4.0 * xp.arctan2(_safe_norm(xp, a - b), _safe_norm(xp, a + b))
+
+
+def _safe_norm(xp: ModuleType, v: Any) -> Any:
+    """Euclidean norm over the last axis whose gradient at 0 is 0 rather than NaN."""
+    n2 = xp.sum(v * v, axis=-1)
+    nonzero = n2 > 0
+    return xp.where(nonzero, xp.sqrt(xp.where(nonzero, n2, 1.0)), 0.0)
 
 
 def quat_slerp(a: Any, b: Any, t: Any) -> Any:
@@ -238,7 +268,9 @@ def euler_to_quat(angles: Any, order: str) -> Any:
         axis = np.zeros(3)
         axis[_AXIS[letter]] = 1.0
         axis_arr = xp.asarray(axis, dtype=angles.dtype)
-        qi = quat_from_axis_angle(xp.broadcast_to(axis_arr, (*angles.shape[:-1], 3)), angles[..., i])
+        qi = quat_from_axis_angle(
+            xp.broadcast_to(axis_arr, (*angles.shape[:-1], 3)), angles[..., i]
+        )
         q = qi if q is None else quat_mul(q, qi)
     return q
 
@@ -246,26 +278,27 @@ def euler_to_quat(angles: Any, order: str) -> Any:
 def quat_to_euler(q: Any, order: str) -> Any:
     """Euler angles (radians, ``(..., 3)`` in the letters' order) with ``R = R_i R_j R_k``.
 
-    For axes ``(i, j, k)`` and ``s = +1`` for a cyclic order (XYZ, YZX, ZXY), ``-1`` otherwise:
-    ``b = asin(s R[i,k])``, ``a = atan2(-s R[j,k], R[k,k])``, ``c = atan2(-s R[i,j], R[i,i])``.
-    At gimbal lock (``|cos b| ≈ 0``) ``c`` is set to 0 and ``a`` absorbs the whole rotation about
-    the shared axis, which reproduces the same matrix.
+    For axes ``(i, j, k)`` and ``s = +1`` for a cyclic order (XYZ, YZX, ZXY), ``-1`` otherwise,
+    the first angle is ``a = atan2(-s R[j,k], R[k,k])``. The other two are read from
+    ``M = R_i(-a) R = R_j(b) R_k(c)``: ``b = atan2(s R[i,k], M[k,k])`` and
+    ``c = atan2(s M[j,i], M[j,j])`` (Shoemake's method, as in Eigen's ``eulerAngles``). Because
+    ``b`` and ``c`` are computed *given* ``a``, the angles rebuild ``R`` to rounding even at or
+    near gimbal lock (``|b| ≈ π/2``), where ``a`` is ill-determined; there ``a`` is read as the
+    whole rotation about the shared axis so that ``c ≈ 0``.
     """
     order = _check_order(order)
     xp = _xp(q)
     i, j, k = (_AXIS[c] for c in order)
     s = 1.0 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
     m = quat_to_matrix(q)
-    sb = xp.clip(s * m[..., i, k], -1.0, 1.0)
-    b = xp.arcsin(sb)
     a = xp.arctan2(-s * m[..., j, k], m[..., k, k])
-    c = xp.arctan2(-s * m[..., i, j], m[..., i, i])
-    # Gimbal lock: R[j,k], R[k,k], R[i,j], R[i,i] all vanish. With c = 0, R = R_i(a) R_j(±π/2)
-    # and a is read from the j-th column's rotation about axis i: a = atan2(R[k,j], R[j,j]).
-    locked = xp.abs(sb) > 1.0 - 1e-7
-    a_locked = xp.arctan2(s * m[..., k, j], m[..., j, j])
-    a = xp.where(locked, a_locked, a)
-    c = xp.where(locked, 0.0, c)
+    # cos b = |(R[j,k], R[k,k])|; when it is at rounding level, a = atan2 of noise. Any a is
+    # then exact (c absorbs it), but a = the full angle about the shared axis gives c ≈ 0.
+    locked = xp.hypot(m[..., j, k], m[..., k, k]) < 1e-6
+    a = xp.where(locked, xp.arctan2(s * m[..., k, j], m[..., j, j]), a)
+    ca, sa = xp.cos(a), xp.sin(a)
+    b = xp.arctan2(s * m[..., i, k], ca * m[..., k, k] - s * sa * m[..., j, k])
+    c = xp.arctan2(s * ca * m[..., j, i] + sa * m[..., k, i], ca * m[..., j, j] + s * sa * m[..., k, j])
     return xp.stack([a, b, c], axis=-1)
 
 

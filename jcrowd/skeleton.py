@@ -16,6 +16,7 @@ transforms and one batched update, so a 31-joint skeleton costs ~8 vectorised st
 from __future__ import annotations
 
 from functools import cached_property
+from itertools import pairwise
 from typing import Any
 
 import equinox as eqx
@@ -67,10 +68,14 @@ class Skeleton(eqx.Module):
             dup = sorted({n for n in names if names.count(n) > 1})
             raise SkeletonError(f"skeleton: expected unique joint names, found duplicates {dup}")
         if parents[0] != -1:
-            raise SkeletonError(f"skeleton: expected joint 0 to be the root (parent -1), found {parents[0]}")
+            raise SkeletonError(
+                f"skeleton: expected joint 0 to be the root (parent -1), found {parents[0]}"
+            )
         for j, p in enumerate(parents[1:], start=1):
             if p == -1:
-                raise SkeletonError(f"skeleton: expected one root, found a second at joint {j} {names[j]!r}")
+                raise SkeletonError(
+                    f"skeleton: expected one root, found a second at joint {j} {names[j]!r}"
+                )
             if not 0 <= p < j:
                 raise SkeletonError(
                     f"skeleton: expected topological order (parent before child), joint {j} "
@@ -78,14 +83,19 @@ class Skeleton(eqx.Module):
                 )
         for e, p in enumerate(self.end_parents):
             if not 0 <= p < len(names):
-                raise SkeletonError(f"skeleton: End Site {e} has parent {p}, expected 0..{len(names) - 1}")
+                raise SkeletonError(
+                    f"skeleton: End Site {e} has parent {p}, expected 0..{len(names) - 1}"
+                )
         shape = getattr(self.offsets, "shape", None)
         if shape is not None and tuple(shape) != (len(names), 3):
-            raise SkeletonError(f"skeleton: expected offsets of shape ({len(names)}, 3), found {shape}")
+            raise SkeletonError(
+                f"skeleton: expected offsets of shape ({len(names)}, 3), found {shape}"
+            )
         end_shape = None if self.end_offsets is None else getattr(self.end_offsets, "shape", None)
         if end_shape is not None and tuple(end_shape) != (len(self.end_parents), 3):
             raise SkeletonError(
-                f"skeleton: expected end_offsets of shape ({len(self.end_parents)}, 3), found {end_shape}"
+                f"skeleton: expected end_offsets of shape ({len(self.end_parents)}, 3), "
+                f"found {end_shape}"
             )
 
     @property
@@ -97,7 +107,9 @@ class Skeleton(eqx.Module):
         try:
             return self.names.index(name)
         except ValueError:
-            raise SkeletonError(f"skeleton: expected a joint named {name!r}, found {list(self.names)}") from None
+            raise SkeletonError(
+                f"skeleton: expected a joint named {name!r}, found {list(self.names)}"
+            ) from None
 
     @cached_property
     def depths(self) -> np.ndarray:
@@ -110,7 +122,10 @@ class Skeleton(eqx.Module):
     @cached_property
     def depth_groups(self) -> tuple[np.ndarray, ...]:
         """Joint indices at each depth, root first: the FK schedule."""
-        return tuple(np.nonzero(self.depths == k)[0].astype(np.int32) for k in range(int(self.depths.max()) + 1))
+        return tuple(
+            np.nonzero(self.depths == k)[0].astype(np.int32)
+            for k in range(int(self.depths.max()) + 1)
+        )
 
     def children(self, j: int) -> tuple[int, ...]:
         """Direct children of joint ``j``."""
@@ -162,7 +177,7 @@ def forward_kinematics(
     # functional scatter per depth would copy the whole (J, 7) array at every depth).
     rots = [local_rotations[..., groups[0], :]]
     poss = [root_position[..., None, :] + offsets[groups[0]]]
-    for prev, idx in zip(groups[:-1], groups[1:], strict=True):
+    for prev, idx in pairwise(groups):
         par = np.searchsorted(prev, parents[idx])
         prot = rots[-1][..., par, :]
         ppos = poss[-1][..., par, :]
@@ -207,7 +222,9 @@ def bone_lengths(skeleton: Skeleton) -> Float[ArrayLike, " J"]:
     return xp.where(xp.arange(len(skeleton.parents)) == 0, 0.0, lengths)
 
 
-def joint_bone_lengths(skeleton: Skeleton, positions: Float[ArrayLike, "*batch J 3"]) -> Float[ArrayLike, "*batch J"]:
+def joint_bone_lengths(
+    skeleton: Skeleton, positions: Float[ArrayLike, "*batch J 3"]
+) -> Float[ArrayLike, "*batch J"]:
     """Distance from each joint to its parent in posed ``positions``; the root's entry is 0."""
     xp = _xp(positions)
     par = np.asarray(skeleton.parents, np.int64)

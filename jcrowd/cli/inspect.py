@@ -26,8 +26,12 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="show a BVH file's skeleton, foot contacts and gait cycles",
         description=__doc__,
     )
-    p.add_argument("file", nargs="?", help="a .bvh file (default: the sample walk shipped with jcrowd)")
-    p.add_argument("--scale", type=float, default=None, help="file units → metres (default: detect)")
+    p.add_argument(
+        "file", nargs="?", help="a .bvh file (default: the sample walk shipped with jcrowd)"
+    )
+    p.add_argument(
+        "--scale", type=float, default=None, help="file units → metres (default: detect)"
+    )
     return p
 
 
@@ -94,7 +98,8 @@ def _render(result: dict[str, Any]) -> None:
     console.print(f"[bold]{result['file']}[/bold]")
     console.print(
         f"{result['joints']} joints, {result['frames']} frames at {result['fps']:g} fps "
-        f"({result['duration_s']:.2f} s; {result['dropped_frames']} leading T-pose frame(s) dropped), "
+        f"({result['duration_s']:.2f} s; {result['dropped_frames']} leading T-pose frame(s) "
+        "dropped), "
         f"units {result['units']} (×{result['scale']:g} → m), height {result['height_m']:.2f} m"
     )
     bones = Table(title="bone lengths (m)", show_edge=False)

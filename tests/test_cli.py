@@ -1,0 +1,114 @@
+"""The command line: --version, inspect (human and JSON), errors, and the README's commands."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from jcrowd import __version__
+from jcrowd.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _json(capsys: pytest.CaptureFixture[str], argv: list[str]) -> tuple[int, dict]:
+    code = main(argv)
+    out = capsys.readouterr().out
+    return code, json.loads(out)
+
+
+def test_version(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"jcrowd {__version__}"
+
+
+def test_inspect_07_01_json(cmu_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, result = _json(capsys, ["inspect", str(cmu_dir / "walk" / "07_01.bvh"), "--json"])
+    assert code == 0
+    # The issue's acceptance facts for this clip.
+    assert result["joints"] == 31
+    assert result["fps"] == pytest.approx(120.0, abs=1e-3)
+    assert result["frames"] == 316
+    assert result["dropped_frames"] == 1
+    assert result["units"] == "cmu"
+    cycles = result["gait_cycles"]
+    assert len(cycles) >= 2
+    assert all(0.8 <= c["dz"] <= 2.0 for c in cycles)
+    for key in ("start", "end", "dx", "dz", "dyaw", "speed"):
+        assert all(key in c for c in cycles)
+    assert result["duration_s"] == pytest.approx(316 / 120, abs=1e-6)
+    assert len(result["bone_lengths_m"]) == 31
+    assert result["contacts"]["feet"]["left"] == ["LeftFoot", "LeftToeBase"]
+
+
+def test_inspect_second_skeleton_json(cmu16_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, result = _json(capsys, ["inspect", str(cmu16_dir / "16_17.bvh"), "--json"])
+    assert code == 0
+    assert (result["joints"], result["frames"], result["dropped_frames"]) == (19, 129, 0)
+    assert result["fps"] == pytest.approx(30.0, abs=1e-3)
+    assert result["units"] == "cm"
+    assert max(abs(c["dyaw_deg"]) for c in result["gait_cycles"]) > 60
+
+
+def test_inspect_human_output(cmu_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", str(cmu_dir / "walk" / "07_01.bvh")]) == 0
+    out = capsys.readouterr().out
+    assert "31 joints, 316 frames at 120 fps" in out
+    assert "gait cycles" in out
+
+
+def test_inspect_shipped_sample(capsys: pytest.CaptureFixture[str]) -> None:
+    code, result = _json(capsys, ["inspect", "--json"])
+    assert code == 0
+    assert result["file"].endswith("sample_walk.bvh")
+    # The sample is the procedural walker: three left-started cycles, gently turning left.
+    left = [c for c in result["gait_cycles"] if c["foot"] == "left"]
+    assert len(left) == 3
+    assert all(c["dyaw"] > 0 for c in left)
+
+
+def test_inspect_errors_are_one_json_object(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "bad.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n")
+    code, result = _json(capsys, ["inspect", str(bad), "--json"])
+    assert code == 2
+    assert result["error"]["type"] == "BVHError"
+    assert "bad.bvh" in result["error"]["message"]
+    code = main(["inspect", str(tmp_path / "missing.bvh")])
+    assert code == 2
+    assert "missing.bvh" in capsys.readouterr().err
+
+
+def test_console_script_runs() -> None:
+    # The installed entry point (what README's first line runs), in a separate process.
+    proc = subprocess.run(
+        [sys.executable, "-m", "jcrowd.cli", "inspect", "--json"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["joints"] > 10
+    assert "shipped sample" in proc.stderr  # logs go to stderr, JSON alone to stdout
+
+
+def test_readme_starts_with_the_two_commands() -> None:
+    text = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"```bash\n(.+?)\n```", text)
+    main_cmd, test_cmd = blocks[0], blocks[1]
+    assert text.index(main_cmd) < 400, "the two commands open the README"
+    assert "pip install ." in main_cmd and main_cmd.rstrip().endswith(
+        ("jcrowd inspect", "jcrowd demo")
+    )
+    assert "pip install -e '.[dev]'" in test_cmd and "pytest" in test_cmd
+    # .ci/run reads the test command from the line after this marker.
+    assert "<!-- test-command -->\n```bash\n" + test_cmd in text
