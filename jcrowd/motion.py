@@ -172,14 +172,18 @@ def headings(motion: Motion) -> Any:
 
 
 def normalize_root(motion: Motion) -> Motion:
-    """Move the clip so frame 0's root is above the origin and faces +Z (height kept)."""
+    """Move the clip so frame 0's root is above the origin and faces +Z (height kept).
+
+    The root joint sits at ``root_position + offsets[0]``; the turn is about that point, so the
+    clip moves rigidly whatever the root's offset.
+    """
     xp = _xp(motion.rotations, motion.root_positions)
     yaw0 = headings(motion)[0]
     turn = yaw_quat(-yaw0)
-    start = motion.root_positions[0] * xp.asarray(
-        [1.0, 0.0, 1.0], dtype=motion.root_positions.dtype
-    )
-    pos = quat_rotate(turn, motion.root_positions - start)
+    off0 = xp.asarray(motion.skeleton.offsets[0], dtype=motion.root_positions.dtype)
+    root_joint = motion.root_positions + off0
+    start = root_joint[0] * xp.asarray([1.0, 0.0, 1.0], dtype=motion.root_positions.dtype)
+    pos = quat_rotate(turn, root_joint - start) - off0
     root = quat_mul(turn, motion.rotations[:, 0])
     rot = xp.concatenate([root[:, None], motion.rotations[:, 1:]], axis=1)
     return Motion(motion.skeleton, rot, pos, motion.fps)
@@ -240,7 +244,8 @@ def mirror(motion: Motion) -> Motion:
     The reflection is ``x → -x`` (in the rest frame, where the character faces +Z); a rotation
     ``(w, x, y, z)`` reflects to ``(w, x, -y, -z)``, and each left joint takes its right
     counterpart's reflected rotation. The skeleton is kept (its offsets are assumed left/right
-    symmetric, as in captured skeletons). Mirroring twice gives the original clip.
+    symmetric, as in captured skeletons; the root's own offset need not be: the root joint at
+    ``root_position + offsets[0]`` is what gets reflected). Mirroring twice gives the original.
 
     Reading taken: the reflection plane is the world YZ plane through the origin, which is the
     sagittal plane after :func:`normalize_root`; a mirrored clip therefore walks to ``-x``.
@@ -255,4 +260,6 @@ def mirror(motion: Motion) -> Motion:
     sign_q = xp.asarray([1.0, 1.0, -1.0, -1.0], dtype=motion.rotations.dtype)
     sign_p = xp.asarray([-1.0, 1.0, 1.0], dtype=motion.root_positions.dtype)
     rot = motion.rotations[:, perm] * sign_q
-    return Motion(motion.skeleton, quat_normalize(rot), motion.root_positions * sign_p, motion.fps)
+    off0 = xp.asarray(motion.skeleton.offsets[0], dtype=motion.root_positions.dtype)
+    pos = (motion.root_positions + off0) * sign_p - off0
+    return Motion(motion.skeleton, quat_normalize(rot), pos, motion.fps)

@@ -292,13 +292,15 @@ def quat_to_euler(q: Any, order: str) -> Any:
     s = 1.0 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
     m = quat_to_matrix(q)
     a = xp.arctan2(-s * m[..., j, k], m[..., k, k])
-    # cos b = |(R[j,k], R[k,k])|; when it is at rounding level, a = atan2 of noise. Any a is
-    # then exact (c absorbs it), but a = the full angle about the shared axis gives c ≈ 0.
-    locked = xp.hypot(m[..., j, k], m[..., k, k]) < 1e-6
+    # cos b = |(R[j,k], R[k,k])|; at rounding level a is atan2 of noise. The a below is exact
+    # at lock and gives c ≈ 0 there; replacing the true a costs |Δa|·cos b ≤ 4π·eps, rounding.
+    locked = xp.hypot(m[..., j, k], m[..., k, k]) < 4 * xp.finfo(m.dtype).eps
     a = xp.where(locked, xp.arctan2(s * m[..., k, j], m[..., j, j]), a)
     ca, sa = xp.cos(a), xp.sin(a)
     b = xp.arctan2(s * m[..., i, k], ca * m[..., k, k] - s * sa * m[..., j, k])
-    c = xp.arctan2(s * ca * m[..., j, i] + sa * m[..., k, i], ca * m[..., j, j] + s * sa * m[..., k, j])
+    c = xp.arctan2(
+        s * ca * m[..., j, i] + sa * m[..., k, i], ca * m[..., j, j] + s * sa * m[..., k, j]
+    )
     return xp.stack([a, b, c], axis=-1)
 
 
