@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from jcrowd.io.bvh import read_bvh
 
 from jcrowd.errors import MotionError
 from jcrowd.gait import (
@@ -19,6 +18,7 @@ from jcrowd.gait import (
     foot_contacts,
     gait_cycles,
 )
+from jcrowd.io.bvh import read_bvh
 from jcrowd.motion import Motion, drop_tpose_frames, mirror, normalize_root, resample
 from jcrowd.rotation import quat_mul, quat_rotate, yaw_quat
 from jcrowd.skeleton import Skeleton
