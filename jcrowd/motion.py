@@ -29,7 +29,7 @@ from jcrowd.rotation import (
     quat_yaw,
     yaw_quat,
 )
-from jcrowd.skeleton import Skeleton, forward_kinematics, rest_positions
+from jcrowd.skeleton import HostOrDevice, Skeleton, forward_kinematics, rest_positions
 
 __all__ = [
     "Motion",
@@ -56,8 +56,8 @@ class Motion(eqx.Module):
     """
 
     skeleton: Skeleton
-    rotations: Float[Array, "F J 4"]
-    root_positions: Float[Array, "F 3"]
+    rotations: Float[HostOrDevice, "F J 4"]
+    root_positions: Float[HostOrDevice, "F 3"]
     fps: float = eqx.field(static=True)
 
     def __check_init__(self) -> None:

@@ -36,6 +36,8 @@ __all__ = [
 ]
 
 ArrayLike = Any
+HostOrDevice = Array | np.ndarray
+"""Data leaves hold NumPy arrays on the offline (fit) path and jax arrays in compiled code."""
 
 
 class Skeleton(eqx.Module):
@@ -52,9 +54,9 @@ class Skeleton(eqx.Module):
 
     names: tuple[str, ...] = eqx.field(static=True)
     parents: tuple[int, ...] = eqx.field(static=True)
-    offsets: Float[Array, "J 3"]
+    offsets: Float[HostOrDevice, "J 3"]
     end_parents: tuple[int, ...] = eqx.field(static=True, default=())
-    end_offsets: Float[Array, "E 3"] | None = None
+    end_offsets: Float[HostOrDevice, "E 3"] | None = None
 
     def __check_init__(self) -> None:
         names, parents = self.names, self.parents

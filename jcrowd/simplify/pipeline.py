@@ -1,0 +1,377 @@
+"""Joint simplification into levels (paper 003 §4–5): analysis → freezing → SQP → rotations.
+
+:func:`simplify_motion` returns, per level, a normal :class:`~jcrowd.motion.Motion` on the level's
+skeleton (it can be written as BVH), the kept joint ids, and its errors. The per-frame position
+problems of a level are solved together: one ``vmap``-ped, ``jit``-compiled SQP per
+(skeleton, level) structure.
+
+Rotation recovery (local rotations from optimised positions), top-down over the kept joints,
+starting from each joint's captured global rotation ``G°``:
+
+- one kept child: the minimal rotation taking the child's bone direction under ``G°`` to its
+  optimised direction, applied to ``G°`` (so the captured twist about the bone is kept);
+- several kept children: the rotation that best maps their bones onto the optimised directions
+  (Kabsch/Wahba by SVD), with ``G°``'s own axes as weak extra pairs so a degenerate (collinear)
+  set still has a unique, twist-preserving answer;
+- no kept child: ``G°`` unchanged.
+
+Errors are measured on the full original skeleton (frozen joints at their key rotation, riding
+with their kept ancestor) against the capture; bone-length variation is measured on the
+optimised positions (what the paper's Fig. 7 reports), relative to each bone's key-posture
+length.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from itertools import pairwise
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jcrowd.errors import MotionError
+from jcrowd.motion import Motion
+from jcrowd.rotation import quat_conj, quat_from_matrix, quat_mul, quat_normalize, quat_rotate
+from jcrowd.simplify.analysis import analyse_motion, elimination_order, key_posture
+from jcrowd.simplify.levels import (
+    LevelPlan,
+    PositionProblem,
+    Weights,
+    _cosines,
+    joint_counts,
+    plan_level,
+    position_problem,
+)
+from jcrowd.simplify.sqp import RESULT, sqp_solve
+from jcrowd.skeleton import forward_kinematics
+
+DEFAULT_WEIGHTS = Weights()
+
+__all__ = ["SimplifiedLevel", "SimplifiedLevels", "simplify_motion", "solve_positions"]
+
+
+@dataclass(frozen=True)
+class SimplifiedLevel:
+    """One level of a simplified clip.
+
+    Attributes:
+        motion: the clip on the level's skeleton.
+        kept: original indices of the kept joints.
+        mean_error_m, max_error_m: joint position error against the capture over every
+            non-root joint of the original skeleton (frozen joints ride rigidly with their
+            parent), so a coarser level never looks better by having fewer joints to measure.
+        bone_variation_mean_pct, bone_variation_max_pct: ``|len − b(0)| / b(0)`` of the
+            optimised positions over bones and frames, in %.
+        iterations: ``(F,)`` SQP iterations per frame; ``result``: ``(F,)`` :class:`RESULT`.
+    """
+
+    motion: Motion
+    kept: tuple[int, ...]
+    mean_error_m: float
+    max_error_m: float
+    bone_variation_mean_pct: float
+    bone_variation_max_pct: float
+    iterations: np.ndarray
+    result: np.ndarray
+
+    @property
+    def num_joints(self) -> int:
+        return len(self.kept)
+
+    @property
+    def converged(self) -> bool:
+        return bool(np.all(self.result == RESULT.CONVERGED))
+
+
+@dataclass(frozen=True)
+class SimplifiedLevels:
+    """All levels of a clip, with the joint order and key frames they were built from."""
+
+    levels: tuple[SimplifiedLevel, ...]
+    order: tuple[int, ...]
+    key_frames: np.ndarray
+    importance: np.ndarray
+
+
+def _objective_and_constraints(problem: PositionProblem, mode: str, w: Weights) -> tuple[Any, Any]:
+    bones, angles = problem.bones, problem.angles
+
+    def full(x: jax.Array) -> jax.Array:  # unknowns are every non-root joint, root at 0
+        return jnp.concatenate([jnp.zeros((1, 3), x.dtype), x.reshape(-1, 3)])
+
+    def residuals(x: jax.Array, params: tuple) -> jax.Array:
+        x0, b0, cos0 = params
+        parts = [jnp.sqrt(w.alpha) * (x - x0)]
+        pos = full(x)
+        if len(angles):
+            parts.append(jnp.sqrt(w.gamma) * (_cosines(pos, angles) - cos0))
+        if mode == "weighted" and len(bones):
+            d = pos[bones[:, 0]] - pos[bones[:, 1]]
+            lengths = jnp.sqrt(jnp.sum(d * d, axis=-1) + 1e-18)
+            parts.append(jnp.sqrt(w.beta) * (lengths - b0))
+        return jnp.concatenate(parts)
+
+    rigid = bones[problem.bone_lengths > 1e-6]
+    tied = bones[problem.bone_lengths <= 1e-6]
+
+    def constraints(x: jax.Array, params: tuple) -> jax.Array:
+        _, b0, _ = params
+        pos = full(x)
+        d = pos[rigid[:, 0]] - pos[rigid[:, 1]]
+        # A zero-length bone (a helper joint on its parent) is a point-to-point tie, three
+        # linear rows; its squared length would have a zero gradient and a singular KKT matrix.
+        tie = (pos[tied[:, 0]] - pos[tied[:, 1]]).reshape(-1)
+        return jnp.concatenate(
+            [jnp.sum(d * d, axis=-1) - b0[problem.bone_lengths > 1e-6] ** 2, tie]
+        )
+
+    return residuals, (constraints if mode == "hard" and len(bones) else None)
+
+
+@lru_cache(maxsize=64)
+def _solver(key: tuple) -> Any:
+    bones, rigid_mask, angles, mode, weights, n_joints, max_iter, tol = key
+    problem = PositionProblem(
+        np.asarray(bones, np.int64).reshape(-1, 2),
+        np.asarray(rigid_mask, np.float64),
+        np.asarray(angles, np.int64).reshape(-1, 3),
+        np.zeros(len(angles)),
+        n_joints,
+    )
+    residuals, constraints = _objective_and_constraints(problem, mode, weights)
+    rigid = int(np.count_nonzero(problem.bone_lengths > 1e-6))
+    m = rigid + 3 * (len(problem.bones) - rigid) if constraints is not None else 0
+
+    def one(x0: jax.Array, b0: jax.Array, cos0: jax.Array) -> Any:
+        return sqp_solve(
+            residuals,
+            constraints,
+            x0,
+            (x0, b0, cos0),
+            num_constraints=m,
+            max_iter=max_iter,
+            tol=tol,
+        )
+
+    return jax.jit(jax.vmap(one, in_axes=(0, None, None)))
+
+
+def solve_positions(
+    problem: PositionProblem,
+    positions: np.ndarray,
+    *,
+    mode: str = "hard",
+    weights: Weights = DEFAULT_WEIGHTS,
+    max_iter: int = 30,
+    tol: float = 1e-5,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Optimised positions ``(F, J, 3)`` (root-relative), iterations and result per frame.
+
+    ``positions`` are the captured joint positions ``(F, J, 3)`` relative to the root.
+    """
+    if mode not in ("hard", "weighted"):
+        raise MotionError(f"simplify: expected mode 'hard' or 'weighted', found {mode!r}")
+    key = (
+        tuple(map(tuple, problem.bones.tolist())),
+        tuple((problem.bone_lengths > 1e-6).astype(float).tolist()),
+        tuple(map(tuple, problem.angles.tolist())),
+        mode,
+        weights,
+        problem.num_joints,
+        max_iter,
+        tol,
+    )
+    solve = _solver(key)
+    f = positions.shape[0]
+    x0 = jnp.asarray(positions[:, 1:].reshape(f, -1), jnp.float32)
+    sol = solve(
+        x0,
+        jnp.asarray(problem.bone_lengths, jnp.float32),
+        jnp.asarray(problem.angle_cos, jnp.float32),
+    )
+    x = np.asarray(sol.x, np.float64).reshape(f, -1, 3)
+    out = np.concatenate([np.zeros((f, 1, 3)), x], axis=1)
+    return out, np.asarray(sol.iterations), np.asarray(sol.result)
+
+
+def _min_rotation(u: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Quaternions ``(F, 4)`` of the smallest rotations taking directions ``u`` to ``d``."""
+    u = u / np.linalg.norm(u, axis=-1, keepdims=True)
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    w = 1.0 + np.sum(u * d, axis=-1, keepdims=True)
+    q = np.concatenate([w, np.cross(u, d)], axis=-1)
+    # Opposite directions: any half turn about an axis perpendicular to u.
+    perp = np.cross(u, np.where(np.abs(u[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
+    half = np.concatenate([np.zeros_like(w), perp], axis=-1)
+    return quat_normalize(np.where(w < 1e-9, half, q))
+
+
+def _kabsch(src: np.ndarray, dst: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Rotations ``(F, 4)`` minimising ``Σ w ‖R src − dst‖²`` (src, dst: ``(F, P, 3)``)."""
+    h = np.einsum("p,fpi,fpj->fij", weights, dst, src)
+    u, _, vt = np.linalg.svd(h)
+    det = np.sign(np.linalg.det(u @ vt))
+    fix = np.ones((len(h), 3))
+    fix[:, 2] = det
+    return quat_from_matrix(u @ (fix[:, :, None] * vt))
+
+
+def recover_rotations(
+    plan: LevelPlan, positions: np.ndarray, captured_global: np.ndarray
+) -> np.ndarray:
+    """Local rotations ``(F, K, 4)`` of a level's skeleton reaching optimised ``positions``.
+
+    Args:
+        plan: the level.
+        positions: ``(F, J, 3)`` optimised positions of every original joint.
+        captured_global: ``(F, J, 4)`` captured global rotations, the twist reference.
+    """
+    sk = plan.skeleton
+    offs = np.asarray(sk.offsets, np.float64)
+    glob = np.zeros((positions.shape[0], sk.num_joints, 4))
+    for i, j in enumerate(plan.kept):
+        g0 = captured_global[:, j]
+        kids = sk.children(i)
+        if len(kids) == 1:
+            c = kids[0]
+            u = quat_rotate(g0, np.broadcast_to(offs[c], g0[:, :3].shape))
+            d = positions[:, plan.kept[c]] - positions[:, j]
+            glob[:, i] = quat_mul(_min_rotation(u, d), g0)
+        elif len(kids) > 1:
+            axes = np.eye(3)
+            src = np.concatenate([offs[list(kids)], axes])
+            dst_bones = np.stack(
+                [positions[:, plan.kept[c]] - positions[:, j] for c in kids], axis=1
+            )
+            dst_axes = quat_rotate(g0[:, None], np.broadcast_to(axes, (len(g0), 3, 3)))
+            scale = float(np.mean(np.sum(offs[list(kids)] ** 2, axis=-1)))
+            weights = np.concatenate([np.ones(len(kids)), np.full(3, 1e-3 * scale)])
+            glob[:, i] = _kabsch(
+                np.broadcast_to(src, (len(g0), *src.shape)),
+                np.concatenate([dst_bones, dst_axes], 1),
+                weights,
+            )
+        else:
+            glob[:, i] = g0
+    local = glob.copy()
+    for i in range(1, sk.num_joints):
+        local[:, i] = quat_mul(quat_conj(glob[:, sk.parents[i]]), glob[:, i])
+    return quat_normalize(local)
+
+
+def expand_rotations(
+    plan: LevelPlan, key: np.ndarray, local: np.ndarray, parents: tuple[int, ...]
+) -> np.ndarray:
+    """The level's local rotations ``(F, K, 4)`` on the *original* skeleton, ``(F, J, 4)``.
+
+    Frozen joints take their key rotation; a kept joint under frozen ones takes back the
+    rotations the level composed into it, so FK on the original skeleton puts kept joints where
+    the level does and frozen joints where they ride along (rigidly, with their parent).
+    """
+    f = local.shape[0]
+    full = np.broadcast_to(np.asarray(key, np.float64), (f, *np.shape(key))).copy()
+    frozen = set(plan.frozen)
+    for i, j in enumerate(plan.kept):
+        chain = np.array([1.0, 0.0, 0.0, 0.0])
+        a = parents[j]
+        while a >= 0 and a in frozen:  # q_f1 ⊗ … ⊗ q_fm, nearest frozen ancestor last
+            chain = quat_mul(np.asarray(key[a], np.float64), chain)
+            a = parents[a]
+        full[:, j] = quat_mul(np.broadcast_to(quat_conj(chain), (f, 4)), local[:, i])
+    return full
+
+
+def simplify_motion(
+    motion: Motion,
+    levels: int = 8,
+    *,
+    order: tuple[int, ...] | None = None,
+    counts: list[int] | None = None,
+    mode: str = "hard",
+    weights: Weights = DEFAULT_WEIGHTS,
+    max_iter: int = 30,
+    tol: float = 1e-5,
+) -> SimplifiedLevels:
+    """Simplify a clip into ``levels`` levels of detail (paper 003).
+
+    Args:
+        motion: the clip (at least 2 frames, finite).
+        levels: number of levels, level 0 being the clip itself.
+        order: elimination order (e.g. from a dataset's summed importance); default: this clip's.
+        counts: joints per level (strictly decreasing, first = all); default :func:`joint_counts`.
+        mode: ``"hard"`` (rigid bones as equality constraints) or ``"weighted"`` (Eq. 5).
+        weights: α, β, γ.
+    """
+    sk = motion.skeleton
+    if motion.num_frames < 2:
+        raise MotionError(
+            f"simplify: expected a clip of at least 2 frames, found {motion.num_frames}"
+        )
+    counts = counts or joint_counts(sk.num_joints, levels)
+    if (
+        len(counts) != levels
+        or counts[0] != sk.num_joints
+        or any(b >= a for a, b in pairwise(counts))
+    ):
+        raise MotionError(
+            f"simplify: expected {levels} strictly decreasing joint counts from "
+            f"{sk.num_joints}, found {counts}"
+        )
+    rot = np.asarray(motion.rotations, np.float64)
+    root = np.asarray(motion.root_positions, np.float64)
+    if not (np.all(np.isfinite(rot)) and np.all(np.isfinite(root))):
+        raise MotionError("simplify: the clip has NaN or infinite rotations or positions")
+    analysis = analyse_motion(motion)
+    order = order or elimination_order(sk, analysis.importance)
+    key = key_posture(motion, analysis.key_frames)
+    glob, pos = forward_kinematics(sk, rot, root)
+    rel = pos - pos[:, :1]
+    out = []
+    for count in counts:
+        plan = plan_level(sk, order, sk.num_joints - count, key)
+        if count == sk.num_joints:
+            opt, iters, res = (
+                rel,
+                np.zeros(motion.num_frames, np.int32),
+                np.zeros(motion.num_frames, np.int32),
+            )
+        else:
+            problem = position_problem(sk, plan, key)
+            opt, iters, res = solve_positions(
+                problem, rel, mode=mode, weights=weights, max_iter=max_iter, tol=tol
+            )
+        problem = position_problem(sk, plan, key)
+        local = recover_rotations(plan, opt + pos[:, :1], glob) if count < sk.num_joints else rot
+        level_motion = Motion(
+            plan.skeleton, local.astype(np.float32), motion.root_positions, motion.fps
+        )
+        # Error over every joint of the original skeleton: frozen joints ride with their parent.
+        _, full_pos = forward_kinematics(sk, expand_rotations(plan, key, local, sk.parents), root)
+        err = np.linalg.norm(full_pos - pos, axis=-1)[:, 1:]
+        b = problem.bones
+        if len(b):
+            lengths = np.linalg.norm(opt[:, b[:, 0]] - opt[:, b[:, 1]], axis=-1)
+            var = (
+                np.abs(lengths - problem.bone_lengths)
+                / np.maximum(problem.bone_lengths, 1e-9)
+                * 100
+            )
+            var = var[:, problem.bone_lengths > 1e-6]
+        else:
+            var = np.zeros((1, 1))
+        out.append(
+            SimplifiedLevel(
+                level_motion,
+                plan.kept,
+                float(err.mean()) if err.size else 0.0,
+                float(err.max()) if err.size else 0.0,
+                float(var.mean()) if var.size else 0.0,
+                float(var.max()) if var.size else 0.0,
+                iters,
+                res,
+            )
+        )
+    return SimplifiedLevels(tuple(out), tuple(order), analysis.key_frames, analysis.importance)
