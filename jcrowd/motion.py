@@ -17,7 +17,7 @@ from typing import Any
 
 import equinox as eqx
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Float
 
 from jcrowd.errors import MotionError
 from jcrowd.rotation import (

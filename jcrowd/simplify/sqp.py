@@ -14,7 +14,8 @@ unique minimiser and its step is a descent direction for the merit function; the
 Lagrangian Hessian was tried first and is indefinite when many frozen joints' angle terms are
 far from their key values, which made the coarsest levels diverge. The step is accepted by
 backtracking on the ℓ1 merit function ``f + ρ‖c‖₁`` over four step sizes (1, ½, ¼, ⅛),
-evaluated together so the loop stays branch-free under ``vmap``. With no constraints it is a damped Newton method.
+evaluated together so the loop stays branch-free under ``vmap``. With no constraints it is a
+damped Gauss–Newton method.
 
 Why jaxopt's QP rather than a jaxopt constrained solver: ``jaxopt.ScipyMinimize`` leaves JAX
 (no ``vmap`` over frames), and its projected-gradient solvers handle box or simplex sets, not
