@@ -23,6 +23,7 @@ length.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from itertools import pairwise
@@ -198,15 +199,23 @@ def solve_positions(
 
 
 def _min_rotation(u: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Quaternions ``(F, 4)`` of the smallest rotations taking directions ``u`` to ``d``."""
-    u = u / np.linalg.norm(u, axis=-1, keepdims=True)
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    """Quaternions ``(F, 4)`` of the smallest rotations taking directions ``u`` to ``d``.
+
+    Where either vector has no length (a zero-length bone) there is no direction to match and
+    the rotation is the identity.
+    """
+    nu = np.linalg.norm(u, axis=-1, keepdims=True)
+    nd = np.linalg.norm(d, axis=-1, keepdims=True)
+    degenerate = (nu < 1e-9) | (nd < 1e-9)
+    u = u / np.maximum(nu, 1e-12)
+    d = d / np.maximum(nd, 1e-12)
     w = 1.0 + np.sum(u * d, axis=-1, keepdims=True)
     q = np.concatenate([w, np.cross(u, d)], axis=-1)
     # Opposite directions: any half turn about an axis perpendicular to u.
     perp = np.cross(u, np.where(np.abs(u[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
     half = np.concatenate([np.zeros_like(w), perp], axis=-1)
-    return quat_normalize(np.where(w < 1e-9, half, q))
+    q = np.where(w < 1e-9, half, q)
+    return quat_normalize(np.where(degenerate, [[1.0, 0.0, 0.0, 0.0]], q))
 
 
 def _kabsch(src: np.ndarray, dst: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -294,6 +303,7 @@ def simplify_motion(
     weights: Weights = DEFAULT_WEIGHTS,
     max_iter: int = 30,
     tol: float = 1e-5,
+    on_level: Callable[[int, SimplifiedLevel], None] | None = None,
 ) -> SimplifiedLevels:
     """Simplify a clip into ``levels`` levels of detail (paper 003).
 
@@ -304,6 +314,7 @@ def simplify_motion(
         counts: joints per level (strictly decreasing, first = all); default :func:`joint_counts`.
         mode: ``"hard"`` (rigid bones as equality constraints) or ``"weighted"`` (Eq. 5).
         weights: α, β, γ.
+        on_level: called with ``(level index, level)`` as each level is done (progress bars).
     """
     sk = motion.skeleton
     if motion.num_frames < 2:
@@ -362,16 +373,17 @@ def simplify_motion(
             var = var[:, problem.bone_lengths > 1e-6]
         else:
             var = np.zeros((1, 1))
-        out.append(
-            SimplifiedLevel(
-                level_motion,
-                plan.kept,
-                float(err.mean()) if err.size else 0.0,
-                float(err.max()) if err.size else 0.0,
-                float(var.mean()) if var.size else 0.0,
-                float(var.max()) if var.size else 0.0,
-                iters,
-                res,
-            )
+        level = SimplifiedLevel(
+            level_motion,
+            plan.kept,
+            float(err.mean()) if err.size else 0.0,
+            float(err.max()) if err.size else 0.0,
+            float(var.mean()) if var.size else 0.0,
+            float(var.max()) if var.size else 0.0,
+            iters,
+            res,
         )
+        out.append(level)
+        if on_level is not None:
+            on_level(len(out) - 1, level)
     return SimplifiedLevels(tuple(out), tuple(order), analysis.key_frames, analysis.importance)
