@@ -67,6 +67,8 @@ class SimplifiedLevel:
         bone_variation_mean_pct, bone_variation_max_pct: ``|len − b(0)| / b(0)`` of the
             optimised positions over bones and frames, in %.
         iterations: ``(F,)`` SQP iterations per frame; ``result``: ``(F,)`` :class:`RESULT`.
+        optimised: ``(F, J, 3)`` the optimised positions of every original joint, relative to
+            the root (frozen joints included; they are dropped from ``motion``).
     """
 
     motion: Motion
@@ -77,6 +79,7 @@ class SimplifiedLevel:
     bone_variation_max_pct: float
     iterations: np.ndarray
     result: np.ndarray
+    optimised: np.ndarray
 
     @property
     def num_joints(self) -> int:
@@ -382,6 +385,7 @@ def simplify_motion(
             float(var.max()) if var.size else 0.0,
             iters,
             res,
+            opt,
         )
         out.append(level)
         if on_level is not None:
