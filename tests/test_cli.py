@@ -112,3 +112,49 @@ def test_readme_starts_with_the_two_commands() -> None:
     assert "pip install -e '.[dev]'" in test_cmd and "pytest" in test_cmd
     # .ci/run reads the test command from the line after this marker.
     assert "<!-- test-command -->\n```bash\n" + test_cmd in text
+
+
+def test_simplify_writes_levels_that_load_elsewhere(
+    cmu16_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from bvh import Bvh
+
+    from jcrowd.io.bvh import read_bvh
+
+    out = tmp_path / "levels"
+    code, report = _json(
+        capsys,
+        [
+            "simplify",
+            str(cmu16_dir / "16_15.bvh"),
+            "--levels",
+            "4",
+            "--out-dir",
+            str(out),
+            "--json",
+        ],
+    )
+    assert code == 0
+    levels = report["levels"]
+    assert [lv["joints"] for lv in levels] == sorted({lv["joints"] for lv in levels}, reverse=True)
+    assert len(levels) == 4 and levels[0]["joints"] == 19
+    assert levels[0]["mean_error_m"] == 0.0
+    for key in ("joints", "mean_error_m", "max_error_m", "bone_length_variation_pct"):
+        assert all(key in lv for lv in levels)
+    assert all(lv["bone_length_variation_pct"] < 1.0 for lv in levels)
+    assert report["seconds"] > 0
+    assert (out / "report.json").is_file() and (out / "report.txt").is_file()
+    for lv in levels:
+        path = Path(lv["file"])
+        assert read_bvh(path).skeleton.num_joints == lv["joints"]
+        with open(path) as f:  # an independent parser sees the same skeleton
+            assert len(Bvh(f.read()).get_joints_names()) == lv["joints"]
+
+
+def test_simplify_rejects_too_many_levels(
+    cmu16_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["simplify", str(cmu16_dir / "16_15.bvh"), "--levels", "40", "--out-dir", str(tmp_path)]
+    code, result = _json(capsys, [*argv, "--json"])
+    assert code == 2
+    assert "at most 18 levels" in result["error"]["message"]
