@@ -9,7 +9,15 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["BVHError", "DataError", "JcrowdError", "MotionError", "SkeletonError", "where"]
+__all__ = [
+    "BVHError",
+    "DataError",
+    "JcrowdError",
+    "MotionError",
+    "SkeletonError",
+    "StoreError",
+    "where",
+]
 
 
 class JcrowdError(ValueError):
@@ -30,6 +38,10 @@ class MotionError(JcrowdError):
 
 class DataError(JcrowdError):
     """A dataset folder or its labels file is invalid."""
+
+
+class StoreError(JcrowdError):
+    """A model file could not be written, read or trusted."""
 
 
 def where(path: str | os.PathLike[str], line: int | None = None) -> str:
