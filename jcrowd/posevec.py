@@ -3,7 +3,7 @@
 Per aligned frame ``t`` (DESIGN §4.5; papers 000 §3.2, 001 §3.5) the pose vector is::
 
     y(t) = [ root height,            1  ÷ body height
-             root velocity,          2  heading frame (x left, z forward), ÷ height, per aligned frame
+             root velocity,          2  heading frame (x left, z forward) ÷ height, per frame
              yaw rate,               1  radians per aligned frame
              root tilt,              3  exp map of the root rotation with its heading removed
              joint rotations,        3 per non-root joint: exp map relative to a reference

@@ -103,8 +103,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     }
     write_atomic(out_dir / "report.json", json.dumps(report, indent=2) + "\n")
     write_atomic(out_dir / "report.txt", _text(report))
-    emit(report, args.json, lambda r: sys.stdout.write(_text(r)))
+    emit(report, args.json, _print_text)
     return report
+
+
+def _print_text(report: dict[str, Any]) -> None:
+    sys.stdout.write(_text(report))
 
 
 def _stderr_console() -> Any:
