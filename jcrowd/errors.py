@@ -16,6 +16,7 @@ __all__ = [
     "MotionError",
     "SkeletonError",
     "StoreError",
+    "TensorError",
     "where",
 ]
 
@@ -38,6 +39,10 @@ class MotionError(JcrowdError):
 
 class DataError(JcrowdError):
     """A dataset folder or its labels file is invalid."""
+
+
+class TensorError(JcrowdError):
+    """A tensor, its ranks or its labels do not fit the decomposition asked for."""
 
 
 class StoreError(JcrowdError):
