@@ -1,0 +1,295 @@
+"""The motion-tensor model: from a folder of BVH captures to multi-level reduced tensors.
+
+The first half of the fit (DESIGN §4 steps 1–7; papers 000 §3.2, §4.1–4.3 and 004 §2–3):
+
+1. clips → gait-cycle samples at the model rate, mirrored (:mod:`jcrowd.samples`);
+2. the joint order for levels from joint importance summed over the dataset (paper 003 Eq. 3,
+   :mod:`jcrowd.simplify`);
+3. every sample aligned by DTW to a reference sample on pose features divided by body height
+   (:mod:`jcrowd.align`), its warp resampled to ``T`` frames;
+4. pose vectors (:mod:`jcrowd.posevec`), scaled per element, stacked into ``M ∈ R^{P×T×S}``;
+5. key levels by the greedy search of 000 §4.2 (:mod:`jcrowd.keylevels`); key level ``l`` also
+   keeps only the most important joints (000 §4.3): the pose elements of the others are not
+   synthesized and those joints stay at their reference (dataset-mean) rotation, which is the
+   tensor model's key posture.
+
+The reference sample is the medoid of the samples under the DTW-free pose distance of their
+time-normalised feature curves (the sample the others are closest to), so no sample has to warp
+far. :func:`build_tensor_model` is pure (no files); :func:`save_tensor_model` and
+:func:`load_tensor_model` use :mod:`jcrowd.io.store`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from jcrowd.align import align_to_reference, pose_features
+from jcrowd.data import Clip
+from jcrowd.errors import DataError
+from jcrowd.io.store import load_store, save_store, skeleton_from_json, skeleton_to_json
+from jcrowd.keylevels import key_levels
+from jcrowd.posevec import PoseLayout, decode_pose_vectors, encode_sample, mean_rotations
+from jcrowd.rotation import quat_rotate, yaw_quat
+from jcrowd.samples import CONTROL_NAMES, Sample, gait_samples, reference_skeleton
+from jcrowd.simplify import elimination_order, joint_counts, joint_importance
+from jcrowd.skeleton import Skeleton, forward_kinematics
+from jcrowd.tensor import Tucker, reconstruct
+
+__all__ = [
+    "TensorLevel",
+    "TensorModel",
+    "TensorModelConfig",
+    "build_tensor_model",
+    "level_errors",
+    "load_tensor_model",
+    "reconstruct_level",
+    "save_tensor_model",
+]
+
+KIND = "tensor-model"
+
+
+@dataclass(frozen=True)
+class TensorModelConfig:
+    """Settings of the tensor fit.
+
+    Attributes:
+        frames: ``T``, aligned frames per sample (000 §5: 100).
+        fps: model rate the clips are resampled to.
+        mirror: add mirrored samples (on for walks).
+        key_levels: ``N`` key levels.
+        max_ranks, min_ranks: ``(R_P, R_T, R_S)`` of key levels 1 and N (000 §5.1 uses 40×40×60
+            and 7×7×9); ``None`` caps those paper values at the tensor's size.
+        dtw: ``"multiscale"`` or ``"exact"``.
+    """
+
+    frames: int = 100
+    fps: float = 60.0
+    mirror: bool = True
+    key_levels: int = 6
+    max_ranks: tuple[int, int, int] | None = None
+    min_ranks: tuple[int, int, int] | None = None
+    dtw: str = "multiscale"
+
+
+@dataclass(frozen=True)
+class TensorLevel:
+    """One key level: the reduced tensor and the joints it synthesizes."""
+
+    tucker: Tucker
+    joints: tuple[int, ...]
+    mse: float
+
+
+@dataclass(frozen=True)
+class TensorModel:
+    """Everything the kriging fit and the crowd step need from the tensor half.
+
+    Attributes:
+        skeleton: the reference skeleton for a 1 m tall character (scale by height).
+        layout: pose-vector layout (references and element scales).
+        order: joint elimination order (least important first).
+        levels: key levels, finest first.
+        controls: ``(S, 5)`` every sample's :data:`~jcrowd.samples.CONTROL_NAMES`.
+        groups: ``(S,)`` clip index per sample (a clip and its mirror share one).
+        sources: clip path per group.
+        mirrored: ``(S,)`` whether each sample is a mirror image.
+        tensor: ``(P, T, S)`` the scaled motion tensor the levels approximate.
+    """
+
+    config: TensorModelConfig
+    skeleton: Skeleton
+    layout: PoseLayout
+    order: tuple[int, ...]
+    levels: tuple[TensorLevel, ...]
+    controls: np.ndarray
+    groups: np.ndarray
+    sources: tuple[str, ...]
+    mirrored: np.ndarray
+    tensor: np.ndarray = field(repr=False)
+
+    @property
+    def heights(self) -> np.ndarray:
+        return self.controls[:, CONTROL_NAMES.index("height")]
+
+
+def _features(sample: Sample) -> np.ndarray:
+    return pose_features(sample.motion) / sample.height
+
+
+def _medoid(features: list[np.ndarray], frames: int) -> int:
+    """Index of the sample whose uniformly time-normalised features are closest to all others."""
+    curves = []
+    for f in features:
+        t = np.linspace(0, len(f) - 1, frames)
+        curves.append(
+            np.stack([np.interp(t, np.arange(len(f)), f[:, k]) for k in range(f.shape[1])], 1)
+        )
+    x = np.stack(curves).reshape(len(curves), -1)
+    sq = np.sum(x * x, axis=1)
+    d = sq[:, None] + sq[None, :] - 2 * x @ x.T
+    return int(np.argmin(np.maximum(d, 0).sum(axis=1)))
+
+
+def _scale(layout: PoseLayout, delta_a_mean: float, frames: int) -> np.ndarray:
+    """Element scales (the tensor stores ``y / scale``) so the groups weigh comparably.
+
+    Angles (tilt, joints) are the unit: 1 rad. A root height error of a quarter body height moves
+    the body as far as 1 rad turns a quarter-height limb, so heights get 0.25. Velocity and yaw
+    rate are per aligned frame and their errors add up over the ``T`` frames of a cycle, so they
+    get 0.25/T and 1/T: a per-frame error worth one unit then shifts the cycle's end by a quarter
+    height or a radian. ΔA is divided by its dataset mean (a relative change of speed).
+    """
+    s = np.ones(layout.size)
+    s[layout.height] = 0.25
+    s[layout.velocity] = 0.25 / frames
+    s[layout.yaw_rate] = 1.0 / frames
+    s[layout.delta_a] = delta_a_mean
+    return s
+
+
+def build_tensor_model(
+    clips: Sequence[Clip], config: TensorModelConfig = TensorModelConfig()
+) -> TensorModel:
+    """Fit the tensor half of a motion model from a dataset's clips (module docstring)."""
+    samples = gait_samples(clips, fps=config.fps, mirrored=config.mirror)
+    if len(samples) < 2:
+        raise DataError(
+            f"tensor model: expected at least 2 gait-cycle samples, found {len(samples)}"
+        )
+    from jcrowd.motion import resample
+
+    skel = reference_skeleton(samples)
+    order = elimination_order(
+        skel, joint_importance([resample(c.motion, config.fps) for c in clips])
+    )
+    feats = [_features(s) for s in samples]
+    ref = _medoid(feats, config.frames)
+    warps = [
+        align_to_reference(feats[ref], f, num_frames=config.frames, method=config.dtw).frames
+        for f in feats
+    ]
+    base = PoseLayout(
+        skel.num_joints, mean_rotations([s.motion.rotations for s in samples]), np.ones(1)
+    )
+    raw = np.stack(
+        [encode_sample(s.motion, w, base, s.height) for s, w in zip(samples, warps, strict=True)]
+    )
+    scale = _scale(base, float(raw[:, :, base.delta_a].mean()), config.frames)
+    layout = PoseLayout(skel.num_joints, base.reference, scale)
+    tensor = np.transpose(raw / scale, (2, 1, 0))  # (P, T, S)
+    p, t, s = tensor.shape
+    max_r = config.max_ranks or (min(p, 40), min(t, 40), min(s, 60))
+    min_r = config.min_ranks or (min(7, max_r[0]), min(7, max_r[1]), min(9, max_r[2]))
+    kl = key_levels(tensor, config.key_levels, max_r, min_r)
+    counts = joint_counts(skel.num_joints, config.key_levels)
+    levels = tuple(
+        TensorLevel(level.tucker, _kept(order, skel.num_joints, count), level.mse)
+        for level, count in zip(kl.levels, counts, strict=True)
+    )
+    controls = np.stack([smp.controls() for smp in samples])
+    groups = np.array([smp.group for smp in samples], np.int32)
+    sources = tuple(c.path for c in clips)
+    mirrored = np.array([smp.mirrored for smp in samples])
+    return TensorModel(
+        config, skel, layout, order, levels, controls, groups, sources, mirrored, tensor
+    )
+
+
+def _kept(order: tuple[int, ...], num_joints: int, count: int) -> tuple[int, ...]:
+    frozen = set(order[: num_joints - count])
+    return tuple(j for j in range(num_joints) if j not in frozen)
+
+
+def reconstruct_level(model: TensorModel, level: int) -> np.ndarray:
+    """Unscaled pose vectors ``(S, T, P)`` of every sample at a key level (joint reduction too)."""
+    lv = model.levels[level]
+    y = np.transpose(reconstruct(lv.tucker), (2, 1, 0)) * model.layout.scale
+    dropped = [j for j in range(1, model.skeleton.num_joints) if j not in lv.joints]
+    y[:, :, model.layout.joint_elements(dropped)] = 0.0  # the reference rotation
+    return y
+
+
+def level_errors(model: TensorModel, level: int) -> tuple[float, float]:
+    """Mean joint position error in the root frame, and mean end-of-cycle root error (m)."""
+    truth = np.transpose(model.tensor, (2, 1, 0)) * model.layout.scale
+    approx = reconstruct_level(model, level)
+    joint_err, root_err = [], []
+    for s in range(truth.shape[0]):
+        h = float(model.heights[s])
+        a = _root_frame(truth[s], model, h)
+        b = _root_frame(approx[s], model, h)
+        joint_err.append(np.linalg.norm(a[0] - b[0], axis=-1).mean())
+        root_err.append(np.linalg.norm(a[1] - b[1]))
+    return float(np.mean(joint_err)), float(np.mean(root_err))
+
+
+def _root_frame(y: np.ndarray, model: TensorModel, height: float) -> tuple[np.ndarray, np.ndarray]:
+    motion, _ = decode_pose_vectors(y, model.layout, model.skeleton.scaled(height), height, 60.0)
+    _, pos = forward_kinematics(
+        motion.skeleton,
+        np.asarray(motion.rotations, np.float64),
+        np.asarray(motion.root_positions, np.float64),
+    )
+    yaw = np.concatenate([[0.0], np.cumsum(y[:-1, model.layout.yaw_rate])])
+    rel = quat_rotate(yaw_quat(-yaw)[:, None], pos[:, 1:] - pos[:, :1])
+    return rel, pos[-1, 0]
+
+
+def save_tensor_model(path: str | os.PathLike[str], model: TensorModel) -> None:
+    """Write the model file (safetensors + JSON metadata), atomically."""
+    tensors: dict[str, np.ndarray] = {
+        "tensor": model.tensor,
+        "layout/reference": model.layout.reference,
+        "layout/scale": model.layout.scale,
+        "samples/controls": model.controls,
+        "samples/groups": model.groups,
+        "samples/mirrored": model.mirrored.astype(np.uint8),
+    }
+    for i, lv in enumerate(model.levels):
+        tensors[f"level{i}/core"] = lv.tucker.core
+        for k, u in enumerate(lv.tucker.factors):
+            tensors[f"level{i}/factor{k}"] = u
+    meta = {
+        "config": asdict(model.config),
+        "skeleton": skeleton_to_json(model.skeleton),
+        "order": list(model.order),
+        "levels": [{"joints": list(lv.joints), "mse": lv.mse} for lv in model.levels],
+        "sources": list(model.sources),
+        "controls": list(CONTROL_NAMES),
+    }
+    save_store(path, tensors, meta, kind=KIND)
+
+
+def load_tensor_model(path: str | os.PathLike[str]) -> TensorModel:
+    """Read a file written by :func:`save_tensor_model` (checked: version, kind, checksum)."""
+    t, meta = load_store(path, kind=KIND)
+    cfg = dict(meta["config"])
+    for key in ("max_ranks", "min_ranks"):
+        cfg[key] = tuple(cfg[key]) if cfg[key] is not None else None
+    skel = skeleton_from_json(meta["skeleton"])
+    layout = PoseLayout(skel.num_joints, t["layout/reference"], t["layout/scale"])
+    levels = tuple(
+        TensorLevel(
+            Tucker(t[f"level{i}/core"], tuple(t[f"level{i}/factor{k}"] for k in range(3))),
+            tuple(lv["joints"]),
+            float(lv["mse"]),
+        )
+        for i, lv in enumerate(meta["levels"])
+    )
+    return TensorModel(
+        TensorModelConfig(**cfg),
+        skel,
+        layout,
+        tuple(meta["order"]),
+        levels,
+        t["samples/controls"],
+        t["samples/groups"],
+        tuple(meta["sources"]),
+        t["samples/mirrored"].astype(bool),
+        t["tensor"],
+    )
