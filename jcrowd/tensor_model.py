@@ -24,6 +24,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
+from typing import Literal
 
 import numpy as np
 
@@ -73,7 +74,7 @@ class TensorModelConfig:
     key_levels: int = 6
     max_ranks: tuple[int, int, int] | None = None
     min_ranks: tuple[int, int, int] | None = None
-    dtw: str = "multiscale"
+    dtw: Literal["multiscale", "exact"] = "multiscale"
 
 
 @dataclass(frozen=True)
@@ -174,7 +175,9 @@ def build_tensor_model(
         for f in feats
     ]
     base = PoseLayout(
-        skel.num_joints, mean_rotations([s.motion.rotations for s in samples]), np.ones(1)
+        skel.num_joints,
+        mean_rotations([np.asarray(s.motion.rotations) for s in samples]),
+        np.ones(1),
     )
     raw = np.stack(
         [encode_sample(s.motion, w, base, s.height) for s, w in zip(samples, warps, strict=True)]

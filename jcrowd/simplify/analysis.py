@@ -135,6 +135,9 @@ def _pair_error(v_ref: jnp.ndarray, v: jnp.ndarray) -> jnp.ndarray:
     r_ref = jnp.linalg.norm(v_ref, axis=-1)
     r = jnp.linalg.norm(v, axis=-1)
     theta = jnp.arctan2(jnp.linalg.norm(jnp.cross(v_ref, v), axis=-1), jnp.sum(v_ref * v, axis=-1))
+    # Equal vectors turn by exactly 0: a fused multiply-add in the cross product leaves ~1e-8
+    # rad, which would make a never-rotating joint look busy and order idle joints by noise.
+    theta = jnp.where(jnp.all(v_ref == v, axis=-1), 0.0, theta)
     return (r_ref + r) * jnp.abs(theta)
 
 

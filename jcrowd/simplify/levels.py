@@ -62,11 +62,17 @@ class LevelPlan:
     skeleton: Skeleton
 
 
-def joint_counts(num_joints: int, levels: int, lowest_fraction: float = 0.08) -> list[int]:
-    """Joints per level, level 0 = all: linear from 100 % to ``lowest_fraction`` of the joints.
+_PAPER_FRACTIONS = (1.0, 0.82, 0.70, 0.58, 0.45, 0.33, 0.20, 0.08)  # 003 Fig. 1
 
-    The default follows paper 003 Fig. 1 (100, 82, …, 20, 8 %). Counts are strictly decreasing
-    and at least 2 (the root and one more joint).
+
+def joint_counts(num_joints: int, levels: int, lowest_fraction: float = 0.08) -> list[int]:
+    """Joints per level, level 0 = all, down to ``lowest_fraction`` of the joints.
+
+    The fractions follow paper 003 Fig. 1 (100, 82, 70, 58, 45, 33, 20, 8 %: a first step of
+    18 %, then about 12.3 % a level, so not linear from 100 %): with 8 levels and the default
+    ``lowest_fraction`` they are the paper's; other level counts resample that curve piecewise
+    linearly, and another ``lowest_fraction`` rescales it to end there. Counts are strictly
+    decreasing and at least 2 (the root and one more joint).
     """
     if levels < 1:
         raise MotionError(f"simplify: expected at least 1 level, found {levels}")
@@ -75,7 +81,9 @@ def joint_counts(num_joints: int, levels: int, lowest_fraction: float = 0.08) ->
             f"simplify: expected at most {num_joints - 1} levels for a {num_joints}-joint skeleton "
             f"(each level drops at least one joint), found {levels}"
         )
-    fracs = np.linspace(1.0, lowest_fraction, levels)
+    paper = np.asarray(_PAPER_FRACTIONS)
+    fracs = np.interp(np.linspace(0, len(paper) - 1, levels), np.arange(len(paper)), paper)
+    fracs = lowest_fraction + (fracs - paper[-1]) / (1 - paper[-1]) * (1 - lowest_fraction)
     counts = [num_joints]
     for i in range(1, levels):
         # Below the level above, and high enough that every later level can still drop one.

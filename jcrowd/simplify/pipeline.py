@@ -314,7 +314,8 @@ def simplify_motion(
         motion: the clip (at least 2 frames, finite).
         levels: number of levels, level 0 being the clip itself.
         order: elimination order (e.g. from a dataset's summed importance); default: this clip's.
-        counts: joints per level (strictly decreasing, first = all); default :func:`joint_counts`.
+        counts: joints per level (strictly decreasing, first = all, last ≥ 2); default
+            :func:`joint_counts`.
         mode: ``"hard"`` (rigid bones as equality constraints) or ``"weighted"`` (Eq. 5).
         weights: α, β, γ.
         on_level: called with ``(level index, level)`` as each level is done (progress bars).
@@ -324,6 +325,10 @@ def simplify_motion(
         raise MotionError(
             f"simplify: expected a clip of at least 2 frames, found {motion.num_frames}"
         )
+    # Every argument is checked before any work: a bad mode with one level, a count below 2 or
+    # an order that is not the non-root joints would otherwise pass silently or fail deep inside.
+    if mode not in ("hard", "weighted"):
+        raise MotionError(f"simplify: expected mode 'hard' or 'weighted', found {mode!r}")
     counts = counts or joint_counts(sk.num_joints, levels)
     if (
         len(counts) != levels
@@ -333,6 +338,15 @@ def simplify_motion(
         raise MotionError(
             f"simplify: expected {levels} strictly decreasing joint counts from "
             f"{sk.num_joints}, found {counts}"
+        )
+    if counts[-1] < 2:
+        raise MotionError(
+            f"simplify: expected every level to keep at least 2 joints, found counts {counts}"
+        )
+    if order is not None and sorted(order) != list(range(1, sk.num_joints)):
+        raise MotionError(
+            f"simplify: expected an elimination order listing each non-root joint "
+            f"1..{sk.num_joints - 1} once, found {tuple(order)}"
         )
     rot = np.asarray(motion.rotations, np.float64)
     root = np.asarray(motion.root_positions, np.float64)
