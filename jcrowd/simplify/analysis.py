@@ -32,13 +32,15 @@ E_j(t_j^key, t)``. The elimination priority list sorts joints by ``ε`` (least i
 ties broken deepest first, then by index); the root is never in it.
 
 Everything is vectorised over frames: the full ``(J, F, F)`` error matrix for small clips, and
-row sums computed in blocks of reference frames (``lax.map``) so long clips stay in memory.
+row sums computed in blocks of reference frames so long clips stay in memory (NumPy float64:
+clip lengths vary, so a compiled kernel would recompile for each one).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -46,7 +48,7 @@ import numpy as np
 
 from jcrowd.errors import MotionError
 from jcrowd.motion import Motion
-from jcrowd.rotation import quat_rotate
+from jcrowd.rotation import _xp, quat_rotate
 from jcrowd.skeleton import Skeleton, rest_positions
 
 __all__ = [
@@ -118,27 +120,32 @@ def _r_max(skeleton: Skeleton) -> float:
     return float(np.linalg.norm(pts, axis=-1).sum())
 
 
-def _child_vectors(skeleton: Skeleton, rotations: jnp.ndarray) -> tuple[jnp.ndarray, np.ndarray]:
-    """Effective children relative to their joint in its parent's frame ``(F, C, 3)``, owners."""
+def _child_vectors(skeleton: Skeleton, rotations: Any) -> tuple[Any, np.ndarray]:
+    """Effective children relative to their joint in its parent's frame ``(F, C, 3)``, owners.
+
+    NumPy in (the offline analysis, float64, no compilation per clip length) gives NumPy out;
+    jax arrays give jax arrays.
+    """
+    xp = _xp(rotations)
     owners, via, offsets = _child_table(skeleton)
-    v = jnp.broadcast_to(
-        jnp.asarray(offsets, rotations.dtype), (rotations.shape[0], len(owners), 3)
-    )
+    shape = (rotations.shape[0], len(owners), 3)
+    v = xp.broadcast_to(xp.asarray(offsets, rotations.dtype), shape)
     for k in range(via.shape[1] - 1, -1, -1):  # innermost zero-offset joint first
         q = rotations[:, np.maximum(via[:, k], 0)]
-        v = jnp.where((via[:, k] >= 0)[None, :, None], quat_rotate(q, v), v)
+        v = xp.where((via[:, k] >= 0)[None, :, None], quat_rotate(q, v), v)
     return quat_rotate(rotations[:, owners], v), owners
 
 
-def _pair_error(v_ref: jnp.ndarray, v: jnp.ndarray) -> jnp.ndarray:
+def _pair_error(v_ref: Any, v: Any) -> Any:
     """``(r(t_ref) + r(t)) θ`` for child vectors ``(..., C, 3)``; ``θ`` via atan2 (exact near 0)."""
-    r_ref = jnp.linalg.norm(v_ref, axis=-1)
-    r = jnp.linalg.norm(v, axis=-1)
-    theta = jnp.arctan2(jnp.linalg.norm(jnp.cross(v_ref, v), axis=-1), jnp.sum(v_ref * v, axis=-1))
+    xp = _xp(v_ref, v)
+    r_ref = xp.linalg.norm(v_ref, axis=-1)
+    r = xp.linalg.norm(v, axis=-1)
+    theta = xp.arctan2(xp.linalg.norm(xp.cross(v_ref, v), axis=-1), xp.sum(v_ref * v, axis=-1))
     # Equal vectors turn by exactly 0: a fused multiply-add in the cross product leaves ~1e-8
     # rad, which would make a never-rotating joint look busy and order idle joints by noise.
-    theta = jnp.where(jnp.all(v_ref == v, axis=-1), 0.0, theta)
-    return (r_ref + r) * jnp.abs(theta)
+    theta = xp.where(xp.all(v_ref == v, axis=-1), 0.0, theta)
+    return (r_ref + r) * xp.abs(theta)
 
 
 def posture_error(motion: Motion) -> jnp.ndarray:
@@ -153,15 +160,20 @@ def posture_error(motion: Motion) -> jnp.ndarray:
     return e / (2 * jnp.pi * _r_max(sk))
 
 
-@jax.jit
-def _row_sums(v: jnp.ndarray, owners_onehot: jnp.ndarray) -> jnp.ndarray:
-    """``Σ_t E`` per (reference frame, joint) without the full matrix: ``(F, J)`` (unnormalised)."""
+def _row_sums(v: np.ndarray, owners: np.ndarray, num_joints: int, block: int = 32) -> np.ndarray:
+    """``Σ_t E`` per (reference frame, joint), unnormalised, ``(F, J)``, without the full matrix.
 
-    def one_ref(v_ref: jnp.ndarray) -> jnp.ndarray:
-        per_child = _pair_error(v_ref[None], v).sum(axis=0)  # (C,)
-        return per_child @ owners_onehot
-
-    return jax.lax.map(one_ref, v, batch_size=64)
+    Reference frames go in blocks, each block one vectorised ``(B, F, C)`` evaluation, so memory
+    stays ``O(B·F·C)`` for long clips. NumPy: clip lengths vary, and a compiled kernel would be
+    recompiled for every length.
+    """
+    per_child = np.empty((len(v), v.shape[1]))
+    for start in range(0, len(v), block):
+        per_child[start : start + block] = _pair_error(v[start : start + block, None], v[None]).sum(
+            axis=1
+        )
+    onehot = np.eye(num_joints)[owners]
+    return per_child @ onehot
 
 
 def analyse_motion(motion: Motion) -> JointAnalysis:
@@ -172,10 +184,9 @@ def analyse_motion(motion: Motion) -> JointAnalysis:
     rot = np.asarray(motion.rotations)
     if not np.all(np.isfinite(rot)):
         raise MotionError("joint analysis: the clip has non-finite rotations")
-    v, owners = _child_vectors(sk, jnp.asarray(rot, jnp.float32))
-    onehot = jnp.asarray(np.eye(sk.num_joints, dtype=np.float32)[owners])
+    v, owners = _child_vectors(sk, rot.astype(np.float64))
     r_max = _r_max(sk)
-    sums = np.asarray(_row_sums(v, onehot), np.float64) / (2 * np.pi * r_max)  # (F, J)
+    sums = _row_sums(v, owners, sk.num_joints) / (2 * np.pi * r_max)  # (F, J)
     key = np.argmin(sums, axis=0)
     importance = sums[key, np.arange(sk.num_joints)] / motion.num_frames
     return JointAnalysis(key.astype(np.int32), importance, r_max)
