@@ -57,6 +57,7 @@ __all__ = [
     "rank_path",
     "storage_report",
     "tucker_nbytes",
+    "tucker_storage",
 ]
 
 Array = np.ndarray
@@ -299,11 +300,17 @@ class StorageReport:
 
 def storage_report(M: Float[Array, "P T S"], kl: KeyLevels, *, itemsize: int = 4) -> StorageReport:
     """Storage accounting of a key-level model of ``M`` (see :class:`StorageReport`)."""
+    return tucker_storage(M, [k.tucker for k in kl.levels], kl.levels[0].mse, itemsize=itemsize)
+
+
+def tucker_storage(
+    M: Float[Array, "P T S"], tuckers: Sequence[Tucker], level1_mse: float, *, itemsize: int = 4
+) -> StorageReport:
+    """Storage of any list of Tucker levels of ``M`` whose finest has MSE ``level1_mse``."""
     M = np.asarray(M, dtype=np.float64)
     P = M.shape[0]
-    level_bytes = tuple(tucker_nbytes(k.tucker, itemsize) for k in kl.levels)
-    e_1 = kl.levels[0].mse
-    r, pca_mse = pca_rank_for_error(M, e_1)
+    level_bytes = tuple(tucker_nbytes(t, itemsize) for t in tuckers)
+    r, pca_mse = pca_rank_for_error(M, level1_mse)
     return StorageReport(
         level_bytes=level_bytes,
         total_bytes=sum(level_bytes),
@@ -311,6 +318,6 @@ def storage_report(M: Float[Array, "P T S"], kl: KeyLevels, *, itemsize: int = 4
         pca_rank=r,
         pca_bytes=(P + M.size // P) * r * itemsize,
         pca_mse=pca_mse,
-        level1_mse=e_1,
+        level1_mse=level1_mse,
         itemsize=itemsize,
     )

@@ -1,0 +1,78 @@
+"""The tensor half of the fit on real captures: accuracy, storage, file round trip."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from jcrowd.data import load_dataset
+from jcrowd.errors import StoreError
+from jcrowd.tensor_model import (
+    TensorModel,
+    build_tensor_model,
+    level_errors,
+    load_tensor_model,
+    reconstruct_level,
+    save_tensor_model,
+    storage,
+)
+
+
+@pytest.fixture(scope="module")
+def model(cmu16_dir: Path) -> TensorModel:
+    return build_tensor_model(load_dataset(cmu16_dir))
+
+
+def test_levels_get_coarser_and_less_accurate(model: TensorModel) -> None:
+    p, t, s = model.tensor.shape
+    assert (t, s) == (100, len(model.controls))
+    assert p == model.layout.size
+    errors = [level_errors(model, i)[0] for i in range(len(model.levels))]
+    # Level 0 reconstructs the samples to ≤ 1 cm mean joint error (the issue's bound).
+    assert errors[0] <= 0.01
+    assert all(b >= a for a, b in itertools.pairwise(errors))
+    ranks = [lv.tucker.ranks for lv in model.levels]
+    assert all(all(x >= y for x, y in zip(a, b, strict=True)) for a, b in itertools.pairwise(ranks))
+    joints = [len(lv.joints) for lv in model.levels]
+    assert joints[0] == model.skeleton.num_joints and joints == sorted(joints, reverse=True)
+    assert all(0 in lv.joints for lv in model.levels)  # the root is always synthesized
+
+
+def test_reconstruction_matches_the_levels_error(model: TensorModel) -> None:
+    # Level 0 synthesizes every joint, so its reconstruction, scaled back, has exactly the
+    # mean squared error the key-level search recorded for it (same tensor, same Tucker model).
+    y = reconstruct_level(model, 0) / model.layout.scale
+    mse = float(np.mean((np.transpose(y, (2, 1, 0)) - model.tensor) ** 2))
+    assert mse == pytest.approx(model.levels[0].mse, rel=1e-9)
+    # A coarser level leaves its dropped joints at the reference rotation (exp map 0).
+    last = model.levels[-1]
+    dropped = [j for j in range(1, model.skeleton.num_joints) if j not in last.joints]
+    y = reconstruct_level(model, len(model.levels) - 1)
+    assert np.all(y[:, :, model.layout.joint_elements(dropped)] == 0.0)
+
+
+def test_storage_beats_raw_and_pca(model: TensorModel) -> None:
+    r = storage(model)
+    assert r.raw_bytes >= 3 * r.total_bytes
+    assert r.pca_bytes > r.level_bytes[0]
+
+
+def test_file_round_trip_is_bit_identical(model: TensorModel, tmp_path: Path) -> None:
+    path = tmp_path / "m.jcm"
+    save_tensor_model(path, model)
+    back = load_tensor_model(path)
+    save_tensor_model(tmp_path / "again.jcm", back)
+    assert (tmp_path / "again.jcm").read_bytes() == path.read_bytes()
+    assert back.config == model.config and back.order == model.order
+    assert back.skeleton.names == model.skeleton.names
+    for a, b in zip(back.levels, model.levels, strict=True):
+        assert a.joints == b.joints
+        assert a.tucker.core.tobytes() == b.tucker.core.tobytes()
+    data = bytearray(path.read_bytes())
+    data[-1] ^= 0xFF
+    path.write_bytes(bytes(data))
+    with pytest.raises(StoreError, match="checksum"):
+        load_tensor_model(path)
