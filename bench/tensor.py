@@ -177,8 +177,8 @@ def _tables(out: dict[str, Any]) -> str:
     for d in (out, out["cmu16"]):
         st = d["stages"]
         lines += [
-            f"### {d['folder']}: {d['samples']} samples, tensor {'×'.join(map(str, d['tensor_shape']))}, "
-            f"built in {d['build_seconds']:.1f} s",
+            f"### {d['folder']}: {d['samples']} samples, tensor "
+            f"{'×'.join(map(str, d['tensor_shape']))}, built in {d['build_seconds']:.1f} s",
             "",
             "| stage | samples | importance | features | DTW | pose vectors | key levels (HOOI) |",
             "|---|---|---|---|---|---|---|",
@@ -203,10 +203,11 @@ def _tables(out: dict[str, Any]) -> str:
             )
         lines += [
             "",
-            f"storage: {d['bytes_total']:,} B for all key levels vs {d['bytes_raw']:,} B raw float32 "
-            f"(ratio {d['storage_ratio']:.1f}); PCA at level 0's error: rank {d['pca_rank']}, "
-            f"{d['pca_bytes']:,} B ({d['pca_ratio']:.2f}× level 0)",
-            f"HOOI at level 0 ranks: {d['hooi_seconds']:.2f} s, rel. error {d['hooi_relative_error']:.5f}; "
+            f"storage: {d['bytes_total']:,} B for all key levels vs {d['bytes_raw']:,} B raw "
+            f"float32 (ratio {d['storage_ratio']:.1f}); PCA at level 0's error: rank "
+            f"{d['pca_rank']}, {d['pca_bytes']:,} B ({d['pca_ratio']:.2f}× level 0)",
+            f"HOOI at level 0 ranks: {d['hooi_seconds']:.2f} s, rel. error "
+            f"{d['hooi_relative_error']:.5f}; "
             f"TensorLy tucker: {d['tensorly_seconds']:.2f} s, {d['tensorly_relative_error']:.5f} "
             f"(ratio {d['hooi_error_ratio_vs_tensorly']:.4f})",
             "",
@@ -217,8 +218,8 @@ def _tables(out: dict[str, Any]) -> str:
     ]
     for r in out["dtw_rows"]:
         lines.append(
-            f"| {r['frames']} | {r['exact_s']:.4f} | {r['multiscale_s']:.4f} | {r['speedup']:.1f} | "
-            f"{r['cost_ratio']:.5f} |"
+            f"| {r['frames']} | {r['exact_s']:.4f} | {r['multiscale_s']:.4f} | "
+            f"{r['speedup']:.1f} | {r['cost_ratio']:.5f} |"
         )
     return "\n".join(lines)
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 
 __all__ = [
+    "AlignError",
     "BVHError",
     "DataError",
     "JcrowdError",
@@ -23,6 +24,10 @@ __all__ = [
 
 class JcrowdError(ValueError):
     """Base class of every error jcrowd raises for bad input."""
+
+
+class AlignError(JcrowdError):
+    """Sequences or warps cannot be aligned as asked (empty, wrong shape, not finite, ...)."""
 
 
 class BVHError(JcrowdError):

@@ -31,7 +31,7 @@ from typing import Literal
 import numpy as np
 from jaxtyping import Float
 
-from jcrowd.errors import JcrowdError
+from jcrowd.errors import AlignError
 
 __all__ = ["AlignError", "LocalCost", "Metric", "cost_matrix"]
 
@@ -41,10 +41,6 @@ CHUNK_ELEMENTS = 1 << 21
 """Floats of scratch (16 MB) one block of cost evaluation may use."""
 _REFINE = 1e-3  # relative d² below which a cell is recomputed from explicit differences
 _BLOCK_ROWS = 64  # window rows per padded block: bounds padding waste when widths vary
-
-
-class AlignError(JcrowdError):
-    """Sequences or warps cannot be aligned as asked (empty, wrong shape, not finite, ...)."""
 
 
 def as_sequence(x: object, what: str) -> np.ndarray:
