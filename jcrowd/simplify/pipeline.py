@@ -107,8 +107,9 @@ def _objective_and_constraints(problem: PositionProblem, mode: str, w: Weights) 
         return jnp.concatenate([jnp.zeros((1, 3), x.dtype), x.reshape(-1, 3)])
 
     def residuals(x: jax.Array, params: tuple) -> jax.Array:
-        x0, b0, cos0 = params
-        parts = [jnp.sqrt(w.alpha) * (x - x0)]
+        # αE_d is the solver's closed-form prior term (see _solver); these are the other rows.
+        _, b0, cos0 = params
+        parts = [jnp.zeros((0,), x.dtype)]
         pos = full(x)
         if len(angles):
             parts.append(jnp.sqrt(w.gamma) * (_cosines(pos, angles) - cos0))
@@ -135,6 +136,31 @@ def _objective_and_constraints(problem: PositionProblem, mode: str, w: Weights) 
     return residuals, (constraints if mode == "hard" and len(bones) else None)
 
 
+def _bone_curvature(problem: PositionProblem) -> Any:
+    """``Σ|λ_k| ∇²c_k`` of the rigid-bone constraints in closed form.
+
+    ``c_k = ‖x_c − x_p‖² − b²`` has Hessian ``2 (e_c − e_p)(e_c − e_p)ᵀ ⊗ I₃``, so the sum is
+    ``2 Dᵀ diag|λ| D ⊗ I₃`` with ``D`` the bones' incidence matrix over the unknown joints (the
+    root is fixed and has no column); tie rows are linear and add nothing.
+    """
+    rigid = problem.bones[problem.bone_lengths > 1e-6]
+    n_unknown = problem.num_joints - 1
+    d = np.zeros((len(rigid), n_unknown))
+    for k, (c, p) in enumerate(rigid):
+        if c > 0:
+            d[k, c - 1] += 1.0
+        if p > 0:
+            d[k, p - 1] -= 1.0
+    d_j = jnp.asarray(d, jnp.float32)
+    eye3 = jnp.eye(3, dtype=jnp.float32)
+
+    def curvature(x: jax.Array, lam_abs: jax.Array) -> jax.Array:
+        m = 2.0 * (d_j.T * lam_abs[: len(rigid)]) @ d_j
+        return jnp.kron(m, eye3).astype(x.dtype)
+
+    return curvature
+
+
 @lru_cache(maxsize=64)
 def _solver(key: tuple) -> Any:
     bones, rigid_mask, angles, mode, weights, n_joints, max_iter, tol = key
@@ -149,6 +175,8 @@ def _solver(key: tuple) -> Any:
     rigid = int(np.count_nonzero(problem.bone_lengths > 1e-6))
     m = rigid + 3 * (len(problem.bones) - rigid) if constraints is not None else 0
 
+    curvature = _bone_curvature(problem) if constraints is not None else None
+
     def one(x0: jax.Array, b0: jax.Array, cos0: jax.Array) -> Any:
         return sqp_solve(
             residuals,
@@ -158,6 +186,9 @@ def _solver(key: tuple) -> Any:
             num_constraints=m,
             max_iter=max_iter,
             tol=tol,
+            prior_weight=weights.alpha,
+            prior=x0,
+            curvature=curvature,
         )
 
     return jax.jit(jax.vmap(one, in_axes=(0, None, None)))
