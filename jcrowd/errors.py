@@ -14,6 +14,7 @@ __all__ = [
     "BVHError",
     "DataError",
     "JcrowdError",
+    "KrigingError",
     "MotionError",
     "SkeletonError",
     "StoreError",
@@ -48,6 +49,10 @@ class DataError(JcrowdError):
 
 class TensorError(JcrowdError):
     """A tensor, its ranks or its labels do not fit the decomposition asked for."""
+
+
+class KrigingError(JcrowdError):
+    """Samples, controls or a variogram cannot be kriged as asked (too few, not finite, ...)."""
 
 
 class StoreError(JcrowdError):

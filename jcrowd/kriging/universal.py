@@ -1,0 +1,364 @@
+"""Universal kriging over control space: the fitted model and its per-query kernels.
+
+Paper 000 §3.3 (Eq. 8): ``K(c) = K_m(c) + Σ_i b_i(c) K_{r,i}`` with the hyperplane trend
+``K_m(c) = F [c; 1]`` (``F = K C†``) and kriging weights ``b(c)`` from the fitted variogram
+(paper 001 Eq. 3); paper 001 App. B for the prediction variance and the reliability ρ.
+
+The fit (:func:`fit_kriging`) is host code in NumPy float64: normalise the controls, fit the
+trend, choose the variogram (:func:`~jcrowd.kriging.crossval.choose_exponent` unless one is
+given) and precompute the solution operator of the kriging system
+(:mod:`~jcrowd.kriging.system`). The model it returns is an :class:`equinox.Module` of arrays
+(float32 by default). The queries are pure ``jnp`` functions of *one* control vector
+(:func:`kriging_weights`, :func:`predict_from_weights`), meant to be ``vmap``-ed inside the
+crowd step; the public batched entry points (:func:`kriging_weights_batch`, :func:`predict`,
+:func:`prediction_variance`, :func:`kriging_variance`, :func:`reliability`) take ``(..., d)``
+queries, are ``filter_jit``-compiled, and reject non-finite queries with ``eqx.error_if``.
+
+Queries are in the caller's units: the model stores the control normalisation and applies it.
+A query that equals a sample's control vector gets that sample's weight one-hot (γ(0) = 0), so
+the model interpolates the samples exactly, with or without a nugget (the nugget then makes the
+prediction jump at the samples, as in PyKrige's ``exact_values=True``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Float, Int
+
+from jcrowd.errors import KrigingError
+from jcrowd.kriging.crossval import (
+    DEFAULT_EXPONENTS,
+    as_values,
+    check_sample_count,
+    choose_exponent,
+)
+from jcrowd.kriging.system import (
+    System,
+    check_system,
+    default_rcond,
+    fit_trend,
+    system_operators,
+)
+from jcrowd.kriging.variogram import Estimator, Lag, as_controls
+from jcrowd.kriging.variogram import semivariogram as _gamma
+from jcrowd.kriging.variogram_fit import VariogramFit, make_variogram
+
+__all__ = [
+    "KrigingModel",
+    "fit_kriging",
+    "kriging_variance",
+    "kriging_weights",
+    "kriging_weights_batch",
+    "normalise_controls",
+    "predict",
+    "predict_from_weights",
+    "prediction_variance",
+    "reliability",
+]
+
+_HIGHEST = jax.lax.Precision.HIGHEST
+"""Full float32 matmuls: GPUs would otherwise use TF32 (~1e-3), too coarse for the operators."""
+
+
+def normalise_controls(
+    controls: Float[Any, "S d"],
+) -> tuple[Float[np.ndarray, "S d"], Float[np.ndarray, " d"], Float[np.ndarray, " d"]]:
+    """Per-dimension standardisation ``(c − mean) / scale`` (NumPy float64).
+
+    Kriging measures lags with the Euclidean norm, so control dimensions in different units
+    (metres, radians, a style scalar) must be made comparable first (paper 001 §6: "all
+    parameters must be normalized"). Each dimension gets zero mean and unit standard deviation
+    over the samples; a constant dimension keeps scale 1 (it adds nothing to any lag). This is
+    isotropic only up to the spread of the samples, not an anisotropy analysis. Idempotent.
+
+    Returns:
+        ``(normalised (S, d), mean (d,), scale (d,))``; queries map as ``(c − mean) / scale``.
+    """
+    c = as_controls(controls)
+    mean = c.mean(axis=0)
+    std = c.std(axis=0)
+    scale = np.where(std > 0, std, 1.0)
+    return (c - mean) / scale, mean, scale
+
+
+class KrigingModel(eqx.Module):
+    """A fitted universal-kriging model (paper 000 Eq. 8), arrays only.
+
+    Attributes:
+        controls: ``(S, d)`` sample controls in the caller's units.
+        control_mean, control_scale: ``(d,)`` normalisation ``ĉ = (c − mean) / scale``. Lags
+            are ``‖(c − c_i) / scale‖``, computed from the differences in caller units so that
+            a query equal to a sample is at lag exactly 0 (normalising both first would round
+            them apart, and with a nugget γ jumps from 0 to θ0 there).
+        trend: ``(d + 1, V)`` hyperplane, ``trend(c) = [1, ĉ] @ trend`` (ĉ normalised).
+        residuals: ``(S, V)`` flattened residuals K_{r,i} = K_i − trend(c_i).
+        gamma_operator, drift_operator: ``(S, S)``, ``(S, q)``: ``b = M_γ γ(c) + M_f f(c)``.
+        lagrange_gamma, lagrange_drift: ``(q, S)``, ``(q, q)``: the multipliers likewise.
+        variogram: the :class:`~jcrowd.kriging.variogram_fit.VariogramFit` in normalised units.
+        dropped: eigen-directions cut from the system as numerically singular (0 normally).
+        value_shape: shape of one sample value (static).
+        system: ``"residual"`` (the papers) or ``"drift"`` (static; see
+            :mod:`~jcrowd.kriging.system`). q = 1 or d + 1.
+    """
+
+    controls: Float[jax.Array, "S d"]
+    control_mean: Float[jax.Array, " d"]
+    control_scale: Float[jax.Array, " d"]
+    trend: Float[jax.Array, "d1 V"]
+    residuals: Float[jax.Array, "S V"]
+    gamma_operator: Float[jax.Array, "S S"]
+    drift_operator: Float[jax.Array, "S q"]
+    lagrange_gamma: Float[jax.Array, "q S"]
+    lagrange_drift: Float[jax.Array, "q q"]
+    variogram: VariogramFit
+    dropped: Int[jax.Array, ""]
+    value_shape: tuple[int, ...] = eqx.field(static=True)
+    system: str = eqx.field(static=True)
+
+    def __check_init__(self) -> None:
+        s, d = self.controls.shape
+        q = 1 if self.system == "residual" else d + 1
+        expected = {
+            "control_mean": (d,),
+            "control_scale": (d,),
+            "trend": (d + 1, self.residuals.shape[1]),
+            "residuals": (s, int(np.prod(self.value_shape, dtype=np.int64))),
+            "gamma_operator": (s, s),
+            "drift_operator": (s, q),
+            "lagrange_gamma": (q, s),
+            "lagrange_drift": (q, q),
+        }
+        for name, shape in expected.items():
+            if getattr(self, name).shape != shape:
+                raise KrigingError(
+                    f"KrigingModel.{name}: expected shape {shape}, found "
+                    f"{getattr(self, name).shape}"
+                )
+
+    @property
+    def num_samples(self) -> int:
+        return int(self.controls.shape[0])
+
+
+def fit_kriging(
+    controls: Float[Any, "S d"],
+    values: Float[Any, "S ..."],
+    variogram: VariogramFit | None = None,
+    *,
+    system: System = "residual",
+    normalise: bool = True,
+    exponents: Sequence[float] = DEFAULT_EXPONENTS,
+    estimator: Estimator = "cressie",
+    bins: int = 10,
+    lag: Lag = "centre",
+    rcond: float | None = None,
+    dtype: Any = np.float32,
+) -> KrigingModel:
+    """Fit universal kriging of ``values`` over ``controls`` (paper 000 §3.3, 001 §3–4).
+
+    Args:
+        controls: ``(S, d)`` control vectors (``(S,)`` is read as d = 1). S ≥ d + 2.
+        values: ``(S, ...)`` sample values of any shape (e.g. ``(S, R_P, R_T)`` cores).
+        variogram: a fitted or known variogram *in normalised control units* (when
+            ``normalise``); ``None`` chooses p by leave-one-out over ``exponents`` and fits θ
+            by Eq. 4 on the residuals' experimental variogram.
+        system: ``"residual"`` (the papers' OLS trend + ordinary kriging of residuals) or
+            ``"drift"`` (Matheron's universal kriging, drift in the system).
+        normalise: standardise the controls first (:func:`normalise_controls`).
+        exponents, estimator, bins, lag: the variogram search, when ``variogram`` is ``None``
+            (:func:`~jcrowd.kriging.crossval.choose_exponent`).
+        rcond: relative eigenvalue cut-off of the system (default ``S · eps(dtype)``).
+        dtype: dtype of the model's arrays (float32; float64 needs ``jax.enable_x64``).
+
+    Returns:
+        :class:`KrigingModel`. Raises :class:`~jcrowd.errors.KrigingError` for non-finite
+        inputs, mismatched shapes or fewer than d + 2 samples.
+    """
+    check_system(system)
+    c = as_controls(controls)
+    s, d = c.shape
+    check_sample_count(s, d)
+    v, value_shape = as_values(values, s)
+    raw = c
+    if normalise:
+        c, mean, scale = normalise_controls(c)
+    else:
+        mean, scale = np.zeros(d), np.ones(d)
+    rcond = default_rcond(s, dtype) if rcond is None else float(rcond)
+    if not rcond > 0.0:
+        raise KrigingError(f"rcond: expected a positive cut-off, found {rcond}")
+    coef, residuals = fit_trend(c, v)
+    if variogram is None:
+        variogram = choose_exponent(
+            c,
+            residuals,
+            exponents,
+            system=system,
+            estimator=estimator,
+            bins=bins,
+            lag=lag,
+            dtype=dtype,
+        ).fit
+    else:
+        variogram = make_variogram(
+            np.asarray(variogram.theta, np.float64),
+            float(variogram.p),
+            int(variogram.result),
+            dtype,
+        )
+    theta = np.asarray(variogram.theta, np.float64)
+    ops = system_operators(c, theta, float(variogram.p), system, rcond)
+
+    def arr(x: np.ndarray) -> jax.Array:
+        return jnp.asarray(x, dtype)
+
+    return KrigingModel(
+        controls=arr(raw),
+        control_mean=arr(mean),
+        control_scale=arr(scale),
+        trend=arr(coef),
+        residuals=arr(residuals),
+        gamma_operator=arr(ops.m_gamma),
+        drift_operator=arr(ops.m_drift),
+        lagrange_gamma=arr(ops.l_gamma),
+        lagrange_drift=arr(ops.l_drift),
+        variogram=variogram,
+        dropped=jnp.asarray(int(ops.dropped), jnp.int32),
+        value_shape=value_shape,
+        system=system,
+    )
+
+
+# ----------------------------------------------------------------------------- one query
+
+
+def _normalised(model: KrigingModel, c: jax.Array) -> jax.Array:
+    return (jnp.asarray(c, model.controls.dtype) - model.control_mean) / model.control_scale
+
+
+def _terms(model: KrigingModel, c: jax.Array) -> tuple[jax.Array, ...]:
+    """γ(c) (S,), f(c) (q,), b (S,), μ (q,) for one query in caller units."""
+    c = jnp.asarray(c, model.controls.dtype)
+    x = _normalised(model, c)
+    diff = (model.controls - c) / model.control_scale
+    h2 = jnp.sum(diff * diff, axis=-1)
+    pos = h2 > 0
+    h = jnp.where(pos, jnp.sqrt(jnp.where(pos, h2, 1.0)), 0.0)  # no NaN gradient at a sample
+    g = _gamma(h, model.variogram.theta, model.variogram.p)
+    one = jnp.ones((1,), x.dtype)
+    f = one if model.system == "residual" else jnp.concatenate([one, x])
+    b = jnp.dot(model.gamma_operator, g, precision=_HIGHEST) + jnp.dot(
+        model.drift_operator, f, precision=_HIGHEST
+    )
+    mu = jnp.dot(model.lagrange_gamma, g, precision=_HIGHEST) + jnp.dot(
+        model.lagrange_drift, f, precision=_HIGHEST
+    )
+    return g, f, b, mu
+
+
+def kriging_weights(
+    model: KrigingModel, c: Float[Any, " d"]
+) -> tuple[Float[jax.Array, " S"], Float[jax.Array, " q"]]:
+    """Kriging weights ``b(c)`` (Σ b = 1) and Lagrange multipliers for one query (001 Eq. 3).
+
+    Pure and unchecked (no ``error_if``): the kernel to ``vmap`` inside a compiled step. The
+    multipliers solve ``Γ b + F μ = γ(c)``; μ has one entry (λ) for the residual system and
+    d + 1 for the drift system.
+    """
+    _, _, b, mu = _terms(model, jnp.asarray(c))
+    return b, mu
+
+
+def predict_from_weights(
+    model: KrigingModel, c: Float[Any, " d"], weights: Float[Any, " S"]
+) -> Float[jax.Array, "*value"]:
+    """``trend(c) + Σ_i b_i K_{r,i}`` (paper 000 Eq. 8) for one query and its weights."""
+    x = _normalised(model, c)
+    basis = jnp.concatenate([jnp.ones((1,), x.dtype), x])
+    w = jnp.asarray(weights, model.residuals.dtype)
+    out = jnp.dot(basis, model.trend, precision=_HIGHEST) + jnp.dot(
+        w, model.residuals, precision=_HIGHEST
+    )
+    return out.reshape(model.value_shape)
+
+
+def _predict_one(model: KrigingModel, c: jax.Array) -> jax.Array:
+    return predict_from_weights(model, c, kriging_weights(model, c)[0])
+
+
+def _prediction_variance_one(model: KrigingModel, c: jax.Array) -> jax.Array:
+    g, _, b, _ = _terms(model, c)
+    return jnp.dot(b, g, precision=_HIGHEST)
+
+
+def _kriging_variance_one(model: KrigingModel, c: jax.Array) -> jax.Array:
+    g, f, b, mu = _terms(model, c)
+    return jnp.dot(b, g, precision=_HIGHEST) + jnp.dot(mu, f, precision=_HIGHEST)
+
+
+def _reliability_one(model: KrigingModel, c: jax.Array) -> jax.Array:
+    sill = model.variogram.theta[0] + model.variogram.theta[1]
+    return 1.0 - _prediction_variance_one(model, c) / sill
+
+
+# ----------------------------------------------------------------------------- batched
+
+
+def _batched(fn: Callable, model: KrigingModel, c: Any) -> Any:
+    """Apply a one-query kernel to ``(..., d)`` queries, after checking them."""
+    d = model.controls.shape[1]
+    c = jnp.asarray(c, model.controls.dtype)
+    if c.ndim == 0 or c.shape[-1] != d:
+        raise KrigingError(f"kriging queries: expected shape (..., {d}), found {c.shape}")
+    c = eqx.error_if(c, ~jnp.all(jnp.isfinite(c)), "kriging queries must be finite")
+    lead = c.shape[:-1]
+    out = jax.vmap(fn, in_axes=(None, 0))(model, c.reshape(-1, d))
+    return jax.tree.map(lambda o: o.reshape(lead + o.shape[1:]), out)
+
+
+@eqx.filter_jit
+def kriging_weights_batch(
+    model: KrigingModel, c: Float[Any, "*Q d"]
+) -> tuple[Float[jax.Array, "*Q S"], Float[jax.Array, "*Q q"]]:
+    """:func:`kriging_weights` for ``(..., d)`` queries: ``jit(vmap(...))`` plus a finite check."""
+    return _batched(kriging_weights, model, c)
+
+
+@eqx.filter_jit
+def predict(model: KrigingModel, c: Float[Any, "*Q d"]) -> Float[jax.Array, "*Q *value"]:
+    """Predicted values ``trend(c) + Σ b_i(c) K_{r,i}`` (000 Eq. 8) at ``(..., d)`` queries."""
+    return _batched(_predict_one, model, c)
+
+
+@eqx.filter_jit
+def prediction_variance(model: KrigingModel, c: Float[Any, "*Q d"]) -> Float[jax.Array, "*Q"]:
+    """σ²(c) = Σ_i b_i(c) γ*(‖c − c_i‖) as in paper 001 App. B.
+
+    This is the paper's estimate: the textbook kriging variance adds the multiplier term
+    (:func:`kriging_variance`). The paper's form is 0 at the samples and the total sill
+    θ0 + θ1 where no sample is correlated, which is what makes ρ run from 1 to 0. Where some
+    weights are negative it can leave [0, θ0 + θ1] slightly; it is not clipped.
+    """
+    return _batched(_prediction_variance_one, model, c)
+
+
+@eqx.filter_jit
+def kriging_variance(model: KrigingModel, c: Float[Any, "*Q d"]) -> Float[jax.Array, "*Q"]:
+    """Textbook kriging variance ``2bᵀγ − bᵀΓb = bᵀγ(c) + μᵀf(c)`` (Cressie 1993 §3.2, §3.4).
+
+    Equal to PyKrige's ``sigmasq`` for the same system; exceeds the sill far from the samples
+    (it includes the uncertainty of the mean / trend). Not used by :func:`reliability`.
+    """
+    return _batched(_kriging_variance_one, model, c)
+
+
+@eqx.filter_jit
+def reliability(model: KrigingModel, c: Float[Any, "*Q d"]) -> Float[jax.Array, "*Q"]:
+    """ρ(c) = 1 − σ²(c) / (θ0 + θ1) (paper 001 App. B): 1 at samples, 0 where uncorrelated."""
+    return _batched(_reliability_one, model, c)

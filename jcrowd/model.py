@@ -1,0 +1,161 @@
+"""``MotionModel``: the reduced motion tensor with universal kriging of its cores, per level.
+
+The second half of the fit (DESIGN §4 steps 8–9; papers 000 §3.3, 001 §3–4). For key level
+``l`` with Tucker model ``M ≈ Z̃ ×1 U_P ×2 U_T ×3 U_S``, sample ``i``'s core is
+``K_i = Z̃ ×3 u_{S,i}`` (an ``R_P × R_T`` matrix), and a new motion for control parameters
+``c`` has the core ``K(c) = K_m(c) + Σ_i b_i(c) K_{r,i}`` (000 Eq. 8, :mod:`jcrowd.kriging`),
+so its pose vectors are ``Y(c) = U_P K(c) U_Tᵀ`` (000 Eq. 4 over all aligned frames).
+
+Controls default to ``(dx, dz, dyaw)`` — the cycle's displacement and turn (000 §5 uses the 2-D
+displacement plus the character's height; a single-subject dataset has no height to vary). The
+kriging model normalises them so the control space is isotropic (001 §6). A synthesized clip
+is the reference skeleton scaled to ``height``. :func:`synthesize_clip` is pure; fitting runs
+NumPy/JAX on arrays.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import jax.numpy as jnp
+import numpy as np
+
+from jcrowd.errors import KrigingError
+from jcrowd.kriging.universal import KrigingModel, fit_kriging, predict, reliability
+from jcrowd.motion import Motion
+from jcrowd.posevec import PoseLayout, decode_pose_vectors, unwarp
+from jcrowd.samples import CONTROL_NAMES
+from jcrowd.skeleton import Skeleton
+from jcrowd.tensor import mode_product
+from jcrowd.tensor_model import TensorModel
+
+__all__ = [
+    "MotionLevel",
+    "MotionModel",
+    "fit_motion_model",
+    "level_pose_vectors",
+    "model_reliability",
+    "sample_cores",
+    "synthesize_clip",
+]
+
+
+@dataclass(frozen=True)
+class MotionLevel:
+    """One accuracy level: bases, the kriged cores and the joints it synthesizes.
+
+    Attributes:
+        u_pose: ``(P, R_P)`` with the rows of dropped joints' elements zeroed (000 §4.3).
+        u_time: ``(T, R_T)``.
+        kriging: kriging of the ``(S, R_P, R_T)`` sample cores over the controls.
+        joints: joints synthesized (the others stay at their reference rotation).
+    """
+
+    u_pose: np.ndarray
+    u_time: np.ndarray
+    kriging: KrigingModel
+    joints: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class MotionModel:
+    """A fitted motion model: per level bases + kriging, plus what decoding needs.
+
+    Attributes:
+        skeleton: reference skeleton for a 1 m tall character.
+        layout: pose-vector layout (references, element scales).
+        control_names: the kriged controls, e.g. ``("dx", "dz", "dyaw")``.
+        control_ranges: ``(d, 2)`` min/max of the samples' controls.
+        levels: finest first.
+        fps: the model rate of synthesized clips.
+        default_height: height (m) used when ``height`` is not a control.
+    """
+
+    skeleton: Skeleton
+    layout: PoseLayout
+    control_names: tuple[str, ...]
+    control_ranges: np.ndarray
+    levels: tuple[MotionLevel, ...]
+    fps: float
+    default_height: float
+
+
+def sample_cores(tucker_core: np.ndarray, u_samples: np.ndarray) -> np.ndarray:
+    """``K_i = Z̃ ×3 u_{S,i}`` for every sample: ``(S, R_P, R_T)`` (000 §3.3)."""
+    return np.moveaxis(mode_product(tucker_core, u_samples, 2), 2, 0)
+
+
+def fit_motion_model(
+    tensor: TensorModel,
+    controls: Sequence[str] = ("dx", "dz", "dyaw"),
+    *,
+    samples: np.ndarray | None = None,
+) -> MotionModel:
+    """Krige every key level's sample cores over ``controls`` (optionally a subset of samples)."""
+    unknown = [c for c in controls if c not in CONTROL_NAMES]
+    if unknown:
+        raise KrigingError(f"controls: expected names from {CONTROL_NAMES}, found {unknown}")
+    idx = [CONTROL_NAMES.index(c) for c in controls]
+    rows = np.arange(len(tensor.controls)) if samples is None else np.asarray(samples)
+    c = tensor.controls[rows][:, idx]
+    levels = []
+    for lv in tensor.levels:
+        u_p, u_t, u_s = lv.tucker.factors
+        cores = sample_cores(lv.tucker.core, u_s[rows])
+        dropped = [j for j in range(1, tensor.skeleton.num_joints) if j not in lv.joints]
+        u_p = np.array(u_p, np.float64)
+        u_p[tensor.layout.joint_elements(dropped)] = 0.0
+        levels.append(MotionLevel(u_p, np.asarray(u_t), fit_kriging(c, cores), lv.joints))
+    ranges = np.stack([c.min(axis=0), c.max(axis=0)], axis=1)
+    return MotionModel(
+        tensor.skeleton,
+        tensor.layout,
+        tuple(controls),
+        ranges,
+        tuple(levels),
+        tensor.config.fps,
+        float(np.median(tensor.heights)),
+    )
+
+
+def level_pose_vectors(model: MotionModel, c: np.ndarray, level: int = 0) -> np.ndarray:
+    """Unscaled pose vectors ``(..., T, P)`` for controls ``(..., d)`` at a level (batched)."""
+    lv = model.levels[level]
+    cores = np.asarray(predict(lv.kriging, jnp.asarray(c, jnp.float32)), np.float64)
+    y = np.einsum("pr,...rs,ts->...tp", lv.u_pose, cores, lv.u_time)
+    return y * model.layout.scale
+
+
+def model_reliability(model: MotionModel, c: np.ndarray, level: int = 0) -> np.ndarray:
+    """ρ(c) (001 App. B) of the level's kriging at ``(..., d)`` controls."""
+    return np.asarray(reliability(model.levels[level].kriging, jnp.asarray(c, jnp.float32)))
+
+
+def synthesize_clip(
+    model: MotionModel, c: Sequence[float], level: int = 0, *, height: float | None = None
+) -> Motion:
+    """One gait cycle for controls ``c`` at ``level``, on the model's clock (``model.fps``).
+
+    Starts above the origin facing +Z; the skeleton is the reference scaled to ``height``
+    (default: the control named ``height`` if kriged, else the model's default height).
+    """
+    q = np.asarray(c, np.float64)
+    if q.shape != (len(model.control_names),) or not np.all(np.isfinite(q)):
+        raise KrigingError(
+            f"synthesize: expected {len(model.control_names)} finite controls "
+            f"{model.control_names}, found {q.tolist()}"
+        )
+    if not 0 <= level < len(model.levels):
+        raise KrigingError(
+            f"synthesize: expected a level in 0..{len(model.levels) - 1}, found {level}"
+        )
+    if height is None:
+        names = model.control_names
+        height = float(q[names.index("height")]) if "height" in names else model.default_height
+    y = level_pose_vectors(model, q, level)
+    y[:, model.layout.delta_a] = np.maximum(y[:, model.layout.delta_a], 1e-3)  # keep time moving
+    motion, times = decode_pose_vectors(
+        y, model.layout, model.skeleton.scaled(height), height, model.fps
+    )
+    return unwarp(motion, times)

@@ -1,0 +1,66 @@
+"""MotionModel: kriged cores reproduce the samples; synthesized clips walk as asked; bad input."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from jcrowd.data import load_dataset
+from jcrowd.errors import KrigingError
+from jcrowd.model import MotionModel, fit_motion_model, level_pose_vectors, synthesize_clip
+from jcrowd.tensor_model import TensorModel, build_tensor_model, reconstruct_level
+
+
+@pytest.fixture(scope="module")
+def fitted(cmu16_dir: Path) -> tuple[TensorModel, MotionModel]:
+    tensor = build_tensor_model(load_dataset(cmu16_dir))
+    return tensor, fit_motion_model(tensor)
+
+
+def test_kriging_interpolates_the_samples(fitted: tuple[TensorModel, MotionModel]) -> None:
+    tensor, model = fitted
+    c = tensor.controls[:, :3]
+    for level in (0, len(model.levels) - 1):
+        ours = level_pose_vectors(model, c, level)
+        truth = reconstruct_level(tensor, level)
+        # Kriging is exact at the samples (one-hot weights); the rest is float32 round-off of
+        # cores ~1e2 through two basis products: 1e-4 of the pose vectors' scale.
+        scale = np.abs(truth).max()
+        assert np.abs(ours - truth).max() < 1e-4 * scale
+
+
+def test_synthesized_cycle_moves_by_its_controls(fitted: tuple[TensorModel, MotionModel]) -> None:
+    tensor, model = fitted
+    s = int(np.argmax(np.abs(tensor.controls[:, 2])))  # the sharpest turn
+    dx, dz, dyaw = tensor.controls[s, :3]
+    clip = synthesize_clip(model, [dx, dz, dyaw], 0, height=float(tensor.heights[s]))
+    assert clip.fps == model.fps
+    root = np.asarray(clip.root_positions)
+    assert np.abs(root[0, [0, 2]]).max() < 1e-6
+    # The clip ends within one model frame of the cycle's end; level 0 reconstructs the root
+    # path to a few cm (bench/tensor.py): 8 cm is the bound for x and z.
+    assert root[-1, 0] == pytest.approx(dx, abs=0.08)
+    assert root[-1, 2] == pytest.approx(dz, abs=0.08)
+
+
+def test_between_samples_the_clip_is_in_between(fitted: tuple[TensorModel, MotionModel]) -> None:
+    _, model = fitted
+    straight = synthesize_clip(model, [0.1, 1.3, 0.0], 0)
+    left = synthesize_clip(model, [0.3, 1.0, 1.2], 0)
+    # A left turn ends to the left (+x) of a straight walk, and shorter in z.
+    assert np.asarray(left.root_positions)[-1, 0] > np.asarray(straight.root_positions)[-1, 0]
+    assert np.asarray(left.root_positions)[-1, 2] < np.asarray(straight.root_positions)[-1, 2]
+
+
+def test_bad_input(fitted: tuple[TensorModel, MotionModel]) -> None:
+    tensor, model = fitted
+    with pytest.raises(KrigingError, match="expected 3 finite controls"):
+        synthesize_clip(model, [0.1, 1.0], 0)
+    with pytest.raises(KrigingError, match="expected 3 finite controls"):
+        synthesize_clip(model, [0.1, float("nan"), 0.0], 0)
+    with pytest.raises(KrigingError, match="expected a level in"):
+        synthesize_clip(model, [0.1, 1.0, 0.0], 99)
+    with pytest.raises(KrigingError, match="expected names from"):
+        fit_motion_model(tensor, ("dx", "wobble"))
