@@ -1,0 +1,35 @@
+"""MotionModel files: save → load rebuilds the same model (same predictions, same bytes)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from jcrowd.data import load_dataset
+from jcrowd.errors import StoreError
+from jcrowd.io.model_file import load_motion_model, save_motion_model
+from jcrowd.model import fit_motion_model, level_pose_vectors
+from jcrowd.tensor_model import TensorModelConfig, build_tensor_model, save_tensor_model
+
+
+def test_round_trip(cmu16_dir: Path, tmp_path: Path) -> None:
+    # A small fit (3 key levels) keeps this test quick; the format does not depend on size.
+    tensor = build_tensor_model(load_dataset(cmu16_dir), TensorModelConfig(key_levels=3))
+    model = fit_motion_model(tensor)
+    path = tmp_path / "m.jcm"
+    save_motion_model(path, model, extra={"note": "test"})
+    back, extra = load_motion_model(path)
+    assert extra == {"note": "test"}
+    assert back.control_names == model.control_names and back.fps == model.fps
+    c = np.array([[0.2, 1.1, 0.5], [0.0, 1.4, -0.3]])
+    for level in range(len(model.levels)):
+        np.testing.assert_array_equal(
+            level_pose_vectors(back, c, level), level_pose_vectors(model, c, level)
+        )
+    save_motion_model(tmp_path / "again.jcm", back, extra=extra)
+    assert (tmp_path / "again.jcm").read_bytes() == path.read_bytes()
+    save_tensor_model(tmp_path / "t.jcm", tensor)
+    with pytest.raises(StoreError, match="expected a 'motion-model' file"):
+        load_motion_model(tmp_path / "t.jcm")
