@@ -158,3 +158,40 @@ def test_simplify_rejects_too_many_levels(
     code, result = _json(capsys, [*argv, "--json"])
     assert code == 2
     assert "at most 18 levels" in result["error"]["message"]
+
+
+def test_fit_writes_a_model_and_a_report(
+    cmu16_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from jcrowd.io.model_file import load_motion_model
+
+    out, report = tmp_path / "m.jcm", tmp_path / "report"
+    argv = ["fit", str(cmu16_dir), "--levels", "3", "--out", str(out), "--report", str(report)]
+    code, result = _json(capsys, [*argv, "--json"])
+    assert code == 0
+    for key in (
+        "samples",
+        "levels",
+        "bytes_total",
+        "bytes_raw",
+        "variogram",
+        "cv",
+        "cv_root",
+        "seconds",
+    ):
+        assert key in result
+    assert len(result["levels"]) == 3
+    assert {"ranks", "joints", "bytes", "error_m"} <= set(result["levels"][0])
+    assert set(result["cv"]) == {"kriging_m", "rbf_m", "nearest_m"}
+    # On cmu16 (the second skeleton) kriging beats RBF and nearest (issue 6's bar).
+    assert result["cv"]["kriging_m"] <= result["cv"]["rbf_m"] < result["cv"]["nearest_m"]
+    model, extra = load_motion_model(out)
+    assert (
+        model.control_names == ("dx", "dz", "dyaw") and extra["fit"]["samples"] == result["samples"]
+    )
+    assert {p.name for p in report.iterdir()} == {
+        "report.txt",
+        "levels.png",
+        "reliability.png",
+        "variogram.png",
+    }
