@@ -1,8 +1,10 @@
-"""``jcrowd inspect FILE.bvh``: skeleton, frames, foot contacts, gait cycles and their parameters.
+"""``jcrowd inspect FILE.bvh|MODEL.jcm``: a capture's gait cycles, or a motion model's levels.
 
-With no file it inspects the sample walk shipped inside the package (made by the procedural
-walker, so it needs no data folder). Frame indices are counted after the dropped T-pose
-frame(s), which are reported as ``dropped_frames``.
+For a BVH file: skeleton, frames, foot contacts, gait cycles and their parameters. With no file
+it inspects the sample walk shipped inside the package (made by the procedural walker, so it
+needs no data folder). Frame indices are counted after the dropped T-pose frame(s), which are
+reported as ``dropped_frames``. For a model file (``jcrowd fit``'s output): levels with ranks,
+joints and bytes, the controls and their ranges, the variogram, and the fit's own report.
 """
 
 from __future__ import annotations
@@ -90,6 +92,61 @@ def inspect_bvh(path: str | Path, scale: float | None = None) -> dict[str, Any]:
     return result
 
 
+def inspect_model(path: str | Path) -> dict[str, Any]:
+    """What ``jcrowd inspect`` reports about a motion-model file."""
+    from jcrowd.io.model_file import load_motion_model
+
+    model, extra = load_motion_model(path)
+    levels = []
+    for lv in model.levels:
+        k = lv.kriging
+        arrays = [lv.u_pose, lv.u_time, k.residuals, k.trend, k.gamma_operator, k.controls]
+        levels.append(
+            {
+                "core": [int(lv.u_pose.shape[1]), int(lv.u_time.shape[1])],
+                "samples": int(k.num_samples),
+                "joints": len(lv.joints),
+                "bytes": int(sum(np.asarray(a).nbytes for a in arrays)),
+                "variogram": {
+                    "p": float(k.variogram.p),
+                    "theta": np.asarray(k.variogram.theta).tolist(),
+                },
+            }
+        )
+    return {
+        "file": str(path),
+        "kind": "motion-model",
+        "joints": model.skeleton.num_joints,
+        "joint_names": list(model.skeleton.names),
+        "controls": list(model.control_names),
+        "control_ranges": np.asarray(model.control_ranges).tolist(),
+        "fps": model.fps,
+        "levels": levels,
+        "bytes_file": Path(path).stat().st_size,
+        "fit": extra.get("fit"),
+    }
+
+
+def _render_model(result: dict[str, Any]) -> None:
+    lines = [
+        f"{result['file']}: motion model, {result['joints']} joints, {result['fps']:g} fps, "
+        f"{result['bytes_file']:,} bytes",
+        "controls: "
+        + ", ".join(
+            f"{n} [{lo:.2f}, {hi:.2f}]"
+            for n, (lo, hi) in zip(result["controls"], result["control_ranges"], strict=True)
+        ),
+    ]
+    for i, lv in enumerate(result["levels"]):
+        v = lv["variogram"]
+        lines.append(
+            f"level {i}: core {'×'.join(map(str, lv['core']))} kriged over {lv['samples']} samples, "
+            f"{lv['joints']} joints, "
+            f"{lv['bytes']:,} bytes, variogram p={v['p']:.1f} θ={np.round(v['theta'], 3).tolist()}"
+        )
+    sys.stdout.write("\n".join(lines) + "\n")
+
+
 def _render(result: dict[str, Any]) -> None:
     from rich.console import Console
     from rich.table import Table
@@ -140,6 +197,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if path is None:
         path = sample_bvh_path()
         sys.stderr.write(f"jcrowd inspect: no file given, inspecting the shipped sample {path}\n")
-    result = inspect_bvh(path, scale=args.scale)
-    emit(result, args.json, _render)
+    if str(path).lower().endswith(".bvh"):
+        result = inspect_bvh(path, scale=args.scale)
+        emit(result, args.json, _render)
+    else:
+        result = inspect_model(path)
+        emit(result, args.json, _render_model)
     return result
