@@ -140,8 +140,8 @@ def _render_model(result: dict[str, Any]) -> None:
     for i, lv in enumerate(result["levels"]):
         v = lv["variogram"]
         lines.append(
-            f"level {i}: core {'×'.join(map(str, lv['core']))} kriged over {lv['samples']} samples, "
-            f"{lv['joints']} joints, "
+            f"level {i}: core {'×'.join(map(str, lv['core']))} kriged over "
+            f"{lv['samples']} samples, {lv['joints']} joints, "
             f"{lv['bytes']:,} bytes, variogram p={v['p']:.1f} θ={np.round(v['theta'], 3).tolist()}"
         )
     sys.stdout.write("\n".join(lines) + "\n")
