@@ -27,6 +27,7 @@ from jcrowd.io.bvh import load_bvh as load_bvh
 from jcrowd.io.bvh import read_bvh as read_bvh
 from jcrowd.io.bvh_write import write_bvh as write_bvh
 from jcrowd.motion import Motion as Motion
+from jcrowd.resources import load_default_model as load_default_model
 from jcrowd.skeleton import Skeleton as Skeleton
 from jcrowd.skeleton import forward_kinematics as forward_kinematics
 from jcrowd.walker import procedural_walk as procedural_walk

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
-__all__ = ["sample_bvh_path"]
+__all__ = ["default_model_path", "load_default_model", "sample_bvh_path"]
 
 
 def _asset(name: str) -> Path:
@@ -19,3 +20,19 @@ def sample_bvh_path() -> Path:
     Rebuilt by ``python scripts/make_sample.py``; used by ``jcrowd inspect`` with no file.
     """
     return _asset("sample_walk.bvh")
+
+
+def default_model_path() -> Path:
+    """The motion model shipped inside the package (fitted from CMU subject 16's walks and turns).
+
+    Rebuilt by ``python scripts/make_default_model.py``; its controls are ``dx, dz, dyaw`` and
+    its range covers heading changes of about −105° to +89° per gait cycle (mirrored samples).
+    """
+    return _asset("default_model.jcm")
+
+
+def load_default_model() -> Any:
+    """The shipped :class:`~jcrowd.model.MotionModel` (no data folder needed)."""
+    from jcrowd.io.model_file import load_motion_model
+
+    return load_motion_model(default_model_path())[0]
