@@ -17,17 +17,22 @@ the same normalised controls as kriging.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
 
+from jcrowd.data import Clip
+from jcrowd.errors import DataError
+from jcrowd.gait import foot_contacts
 from jcrowd.kriging.rbf import fit_rbf, predict_nearest, predict_rbf
 from jcrowd.kriging.universal import fit_kriging, normalise_controls, predict
-from jcrowd.model import sample_cores
-from jcrowd.samples import CONTROL_NAMES
+from jcrowd.model import MotionModel, model_reliability, sample_cores, synthesize_clip
+from jcrowd.motion import Motion, joint_positions
+from jcrowd.samples import CONTROL_NAMES, gait_samples
 from jcrowd.tensor_model import TensorModel, _root_frame
 
-__all__ = ["METHODS", "leave_one_clip_out"]
+__all__ = ["METHODS", "evaluate_captures", "foot_skate", "leave_one_clip_out"]
 
 METHODS = ("kriging", "rbf", "nearest")
 
@@ -88,3 +93,76 @@ def leave_one_clip_out(
         }
         for m, v in errors.items()
     }
+
+
+def foot_skate(motion: Motion) -> float:
+    """Mean horizontal slide (m per frame) of a foot in contact, over both feet.
+
+    On every contact frame (:func:`jcrowd.gait.foot_contacts`) the foot's planted joint is the
+    lower of its ankle and toe (heel down, then toe down); its horizontal displacement to the
+    next frame is the slide. A perfect plant slides 0; a capture's own value (marker noise, the
+    heel-to-toe roll) is the reference to compare a synthesized clip with, at the same frame rate.
+    """
+    contacts = foot_contacts(motion)
+    pos = np.asarray(joint_positions(motion), np.float64)
+    slides = []
+    feet = (
+        (contacts.left, contacts.feet.left_ankle, contacts.feet.left_toe),
+        (contacts.right, contacts.feet.right_ankle, contacts.feet.right_toe),
+    )
+    for flags, ankle, toe in feet:
+        on = np.nonzero(flags[:-1] & flags[1:])[0]
+        low = np.where(pos[on, ankle, 1] <= pos[on, toe, 1], ankle, toe)
+        step = pos[on + 1, low][:, [0, 2]] - pos[on, low][:, [0, 2]]
+        slides.append(np.linalg.norm(step, axis=-1))
+    every = np.concatenate(slides)
+    return float(every.mean()) if every.size else 0.0
+
+
+def evaluate_captures(
+    model: MotionModel, clips: Sequence[Clip], *, level: int = 0
+) -> list[dict[str, Any]]:
+    """Predict every left-started gait cycle of ``clips`` and compare with the capture.
+
+    Per cycle: its controls, the model's reliability there, mean/max joint position error in the
+    root frame after DTW time alignment (pose features ÷ height), and foot skate
+    (:func:`foot_skate`) of the prediction and of the capture. The clips must use the model's
+    skeleton (joint names).
+    """
+    from jcrowd.align import align_to_reference, pose_features
+
+    names = model.skeleton.names
+    out = []
+    for sample in gait_samples(clips, fps=model.fps, mirrored=False):
+        if sample.motion.skeleton.names != names:
+            raise DataError(
+                f"{sample.source}: expected the model's skeleton (joints {list(names)}), found "
+                f"{list(sample.motion.skeleton.names)}"
+            )
+        c = sample.controls(model.control_names)
+        pred = synthesize_clip(model, c.tolist(), level, height=sample.height)
+        fp = pose_features(pred) / sample.height
+        fs = pose_features(sample.motion) / sample.height
+        warp = align_to_reference(
+            fs, fp, num_frames=sample.motion.num_frames, method="exact"
+        ).frames
+        a = pose_features(sample.motion).reshape(sample.motion.num_frames, -1, 3)
+        b_all = pose_features(pred).reshape(pred.num_frames, -1, 3)
+        i0 = np.clip(np.floor(warp).astype(int), 0, pred.num_frames - 1)
+        i1 = np.minimum(i0 + 1, pred.num_frames - 1)
+        w = (warp - i0)[:, None, None]
+        b = b_all[i0] * (1 - w) + b_all[i1] * w
+        err = np.linalg.norm(a - b, axis=-1)
+        out.append(
+            {
+                "file": sample.source,
+                "start": sample.cycle.start,
+                "c": c.tolist(),
+                "reliability": float(model_reliability(model, c[None], level)[0]),
+                "mean_error_m": float(err.mean()),
+                "max_error_m": float(err.max()),
+                "skate_pred_cm": 100 * foot_skate(pred),
+                "skate_true_cm": 100 * foot_skate(sample.motion),
+            }
+        )
+    return out

@@ -1,0 +1,69 @@
+"""``jcrowd eval MODEL DATA_DIR``: how well a model predicts captures it never saw.
+
+For every left-started gait cycle in DATA_DIR: its control parameters, the model's reliability
+there, mean and max joint position error of the prediction against the capture after DTW time
+alignment (root frame, m), and foot skate (mean horizontal slide of a planted foot per frame at
+the model rate, cm) of the prediction and of the capture. ``--json`` prints one JSON object on
+stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+import numpy as np
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(sub: Any) -> argparse.ArgumentParser:
+    p: argparse.ArgumentParser = sub.add_parser(
+        "eval", help="compare a model's predictions with unseen captures", description=__doc__
+    )
+    p.add_argument("model", help="a model file written by jcrowd fit")
+    p.add_argument("data_dir", help="folder of .bvh files (the model's skeleton)")
+    p.add_argument("--level", type=int, default=0)
+    return p
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    from jcrowd.cli import emit
+    from jcrowd.data import load_dataset
+    from jcrowd.evaluate import evaluate_captures
+    from jcrowd.io.model_file import load_motion_model
+
+    model, _ = load_motion_model(args.model)
+    cycles = evaluate_captures(model, load_dataset(args.data_dir), level=args.level)
+    result = {
+        "model": str(args.model),
+        "data_dir": str(args.data_dir),
+        "level": args.level,
+        "cycles": cycles,
+        "mean_error_m": float(np.mean([c["mean_error_m"] for c in cycles])),
+        "skate_pred_cm": float(np.mean([c["skate_pred_cm"] for c in cycles])),
+        "skate_true_cm": float(np.mean([c["skate_true_cm"] for c in cycles])),
+    }
+    emit(result, args.json, _print)
+    return result
+
+
+def _print(result: dict[str, Any]) -> None:
+    lines = [
+        f"{'file':>12} {'start':>5} {'controls':>24} {'ρ':>5} {'mean cm':>8} {'max cm':>7} "
+        f"{'skate pred/true cm':>19}"
+    ]
+    for c in result["cycles"]:
+        ctl = ", ".join(f"{v:+.2f}" for v in c["c"])
+        lines.append(
+            f"{c['file'].rsplit('/', 1)[-1]:>12} {c['start']:>5} {ctl:>24} "
+            f"{c['reliability']:>5.2f} "
+            f"{100 * c['mean_error_m']:>8.2f} {100 * c['max_error_m']:>7.2f} "
+            f"{c['skate_pred_cm']:>9.2f} / {c['skate_true_cm']:<7.2f}"
+        )
+    lines.append(
+        f"mean: {100 * result['mean_error_m']:.2f} cm joint error; foot skate "
+        f"{result['skate_pred_cm']:.2f} cm predicted vs {result['skate_true_cm']:.2f} cm captured"
+    )
+    sys.stdout.write("\n".join(lines) + "\n")
