@@ -64,3 +64,22 @@ def test_bad_input(fitted: tuple[TensorModel, MotionModel]) -> None:
         synthesize_clip(model, [0.1, 1.0, 0.0], 99)
     with pytest.raises(KrigingError, match="expected names from"):
         fit_motion_model(tensor, ("dx", "wobble"))
+
+
+def test_kriging_beats_rbf_and_nearest_on_the_walker() -> None:
+    """Ground truth from the procedural walker: a 4×5 grid of speeds and turns, 2 cycles each."""
+    from jcrowd.data import Clip
+    from jcrowd.evaluate import leave_one_clip_out
+    from jcrowd.tensor_model import TensorModelConfig
+    from jcrowd.walker import procedural_walk
+
+    grid = [(v, y) for v in (1.0, 1.25, 1.5, 1.75) for y in (-0.6, -0.3, 0.0, 0.3, 0.6)]
+    clips = []
+    for i, (speed, dyaw) in enumerate(grid):
+        motion, _ = procedural_walk(cycles=2, speed=speed, dyaw_per_cycle=dyaw, seed=i)
+        clips.append(Clip(f"walker_{i}", motion, 0, None, None, None))
+    tensor = build_tensor_model(clips, TensorModelConfig(key_levels=2, mirror=False))
+    cv = leave_one_clip_out(tensor)  # every held-out clip's controls are new to the fit
+    # Measured: kriging 0.60 / 3.1 cm, RBF 0.76 / 5.0 cm, nearest 2.2 / 25 cm (joint / root).
+    assert cv["kriging"]["joint_m"] < cv["rbf"]["joint_m"] < cv["nearest"]["joint_m"]
+    assert cv["kriging"]["root_m"] < cv["rbf"]["root_m"] < cv["nearest"]["root_m"]
