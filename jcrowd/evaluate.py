@@ -24,6 +24,7 @@ import numpy as np
 
 from jcrowd.data import Clip
 from jcrowd.errors import DataError
+from jcrowd.footlock import lock_feet
 from jcrowd.gait import foot_contacts
 from jcrowd.kriging.rbf import fit_rbf, predict_nearest, predict_rbf
 from jcrowd.kriging.universal import fit_kriging, normalise_controls, predict
@@ -126,7 +127,8 @@ def evaluate_captures(
 
     Per cycle: its controls, the model's reliability there, mean/max joint position error in the
     root frame after DTW time alignment (pose features ÷ height), and foot skate
-    (:func:`foot_skate`) of the prediction and of the capture. The clips must use the model's
+    (:func:`foot_skate`) of the prediction, of the prediction after foot locking
+    (:func:`jcrowd.footlock.lock_feet`) and of the capture. The clips must use the model's
     skeleton (joint names).
     """
     from jcrowd.align import align_to_reference, pose_features
@@ -162,6 +164,7 @@ def evaluate_captures(
                 "mean_error_m": float(err.mean()),
                 "max_error_m": float(err.max()),
                 "skate_pred_cm": 100 * foot_skate(pred),
+                "skate_locked_cm": 100 * foot_skate(lock_feet(pred)),
                 "skate_true_cm": 100 * foot_skate(sample.motion),
             }
         )

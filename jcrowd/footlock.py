@@ -1,0 +1,43 @@
+"""Foot locking by root correction: planted feet do not slide.
+
+A synthesized cycle is an interpolation of captures; small frame-to-frame errors in the legs and
+in the decoded root velocity make a planted foot slide (measured: ~2.6× the captures' own slide
+on ``cmu16``). The classic clean-up used here moves only the root: between consecutive frames in
+which a foot is planted (:func:`jcrowd.gait.foot_contacts`; the planted joint is the lower of its
+ankle and toe), the root's horizontal step is reduced by the planted joint's horizontal slide
+(averaged over both feet in double support). In single support the planted joint then stays
+exactly where it was; the legs' poses are untouched. The correction is horizontal only, so
+heights and the pose in the root frame are unchanged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from jcrowd.gait import foot_contacts
+from jcrowd.motion import Motion, joint_positions
+
+__all__ = ["lock_feet"]
+
+
+def lock_feet(motion: Motion) -> Motion:
+    """The clip with its root's horizontal path corrected so planted feet stay put."""
+    contacts = foot_contacts(motion)
+    pos = np.asarray(joint_positions(motion), np.float64)
+    f = motion.num_frames
+    slide = np.zeros((f - 1, 2))
+    count = np.zeros(f - 1)
+    feet = (
+        (contacts.left, contacts.feet.left_ankle, contacts.feet.left_toe),
+        (contacts.right, contacts.feet.right_ankle, contacts.feet.right_toe),
+    )
+    for flags, ankle, toe in feet:
+        on = np.nonzero(flags[:-1] & flags[1:])[0]
+        low = np.where(pos[on, ankle, 1] <= pos[on, toe, 1], ankle, toe)
+        slide[on] += pos[on + 1, low][:, [0, 2]] - pos[on, low][:, [0, 2]]
+        count[on] += 1
+    slide = np.where(count[:, None] > 0, slide / np.maximum(count, 1)[:, None], 0.0)
+    root = np.asarray(motion.root_positions, np.float64).copy()
+    correction = np.concatenate([np.zeros((1, 2)), np.cumsum(slide, axis=0)])
+    root[:, [0, 2]] -= correction
+    return Motion(motion.skeleton, motion.rotations, root.astype(np.float32), motion.fps)
