@@ -182,7 +182,7 @@ def test_fit_writes_a_model_and_a_report(
         assert key in result
     assert len(result["levels"]) == 3
     assert {"ranks", "joints", "bytes", "error_m"} <= set(result["levels"][0])
-    assert set(result["cv"]) == {"kriging_m", "rbf_m", "nearest_m"}
+    assert set(result["cv"]) == {"kriging_m", "per_pose_m", "rbf_m", "nearest_m"}
     # On cmu16 (the second skeleton) kriging beats RBF and nearest (issue 6's bar).
     assert result["cv"]["kriging_m"] <= result["cv"]["rbf_m"] < result["cv"]["nearest_m"]
     model, extra = load_motion_model(out)
