@@ -27,11 +27,9 @@ Prints one table (or one JSON object) and appends a dated row to ``bench/RESULTS
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
 import os
 import platform
-import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -46,19 +44,15 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 from dtaidistance import dtw_ndim
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import append_result, data_root, machine
+
 from jcrowd.align import dtw, multiscale_dtw, physics_features, pose_features
 from jcrowd.gait import gait_cycles
 from jcrowd.io.bvh import read_bvh
 from jcrowd.motion import drop_tpose_frames
 
-ROOT = Path(__file__).resolve().parents[1]
 SIZES = (300, 1000, 3000)
-
-
-def _data() -> Path:
-    env = os.environ.get("JCROWD_DATA")
-    base = Path(env) if env else ROOT.parent / "shared" / "data"
-    return base / "cmu" if (base / "cmu").is_dir() else base
 
 
 def _resample(x: np.ndarray, frames: int) -> np.ndarray:
@@ -71,7 +65,7 @@ def _resample(x: np.ndarray, frames: int) -> np.ndarray:
 
 def _pieces(subject: str, feature: Callable[..., np.ndarray], cycles: bool) -> list[np.ndarray]:
     out = []
-    for path in sorted((_data() / "walk").glob(f"{subject}_*.bvh")):
+    for path in sorted((data_root() / "cmu" / "walk").glob(f"{subject}_*.bvh")):
         motion = drop_tpose_frames(read_bvh(path))[0]
         f = feature(motion)
         if cycles:
@@ -166,7 +160,7 @@ def main() -> None:
         "dtw_multiscale_cost_ratio": at_3000["cost_ratio"],
         "sequences": args.sequences,
         "repeats": args.repeats,
-        "machine": f"{platform.node()} {platform.machine()} {os.cpu_count()} cpu",
+        "machine": machine(),
         "numpy": np.__version__,
         "blas_threads": os.environ["OPENBLAS_NUM_THREADS"],
         "python": platform.python_version(),
@@ -191,23 +185,6 @@ def main() -> None:
         _record(out, tables)
 
 
-def _code_version() -> str:
-    """The checkout's commit, marked ``+dirty`` when the working tree differs (read only)."""
-    try:
-        head = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--", "jcrowd/align", "bench/dtw.py"],
-            cwd=ROOT,
-            capture_output=True,
-            text=True,
-        ).stdout.strip()
-    except OSError:
-        return "unknown"
-    return (head or "unknown") + ("+dirty" if dirty else "")
-
-
 def _record(out: dict[str, Any], tables: str) -> None:
     try:
         import jax
@@ -215,18 +192,13 @@ def _record(out: dict[str, Any], tables: str) -> None:
         jax_version = jax.__version__
     except ImportError:  # the bench itself does not need jax
         jax_version = "absent"
-    path = ROOT / "bench" / "RESULTS.md"
-    if not path.exists():
-        path.write_text("# Benchmark results\n\nOne dated row per run; newest last.\n")
-    with path.open("a") as f:
-        f.write(
-            f"\n## dtw — {dt.date.today().isoformat()} — code {_code_version()} — "
-            f"{out['machine']}, numpy {out['numpy']}, "
-            f"jax {jax_version} (unused), OpenBLAS threads {out['blas_threads']}, "
-            f"sequences={out['sequences']}, median of "
-            f"{out['repeats']} after a warm-up\n\n{tables}"
-        )
-    print(f"appended to {path}", file=sys.stderr)
+    append_result(
+        "dtw",
+        f"{out['machine']}, numpy {out['numpy']}, jax {jax_version} (unused), OpenBLAS threads "
+        f"{out['blas_threads']}, sequences={out['sequences']}, median of {out['repeats']} after "
+        "a warm-up",
+        tables,
+    )
 
 
 if __name__ == "__main__":

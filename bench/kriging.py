@@ -19,11 +19,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import datetime as dt
 import io
 import json
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -36,20 +34,15 @@ import jax.numpy as jnp
 import numpy as np
 from pykrige.ok import OrdinaryKriging
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import append_result, data_root, machine
+
 from jcrowd.cli import main as jcrowd_main
 from jcrowd.data import load_dataset
 from jcrowd.evaluate import evaluate_captures, leave_one_clip_out
 from jcrowd.kriging import fit_kriging, kriging_weights_batch, make_variogram
 from jcrowd.model import fit_motion_model
 from jcrowd.tensor_model import build_tensor_model
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _data() -> Path:
-    env = os.environ.get("JCROWD_DATA")
-    base = Path(env) if env else ROOT.parent / "shared" / "data"
-    return base if (base / "cmu").is_dir() else base.parent
 
 
 def _median(fn: Any, repeats: int) -> float:
@@ -99,7 +92,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-record", action="store_true")
     args = ap.parse_args()
-    data = _data()
+    data = data_root()
     cv, cv_root = {}, {}
     for name, folder in (("cmu/walk", data / "cmu" / "walk"), ("cmu16", data / "cmu16")):
         tensor = build_tensor_model(load_dataset(folder))
@@ -131,7 +124,7 @@ def main() -> None:
         "skate_cm": skate,
         **tp,
         "fit_seconds": fit_s,
-        "machine": f"{platform.node()} {platform.machine()} {os.cpu_count()} cpu",
+        "machine": machine(),
         "jax": jax.__version__,
     }
     text = _table(out)
@@ -140,11 +133,7 @@ def main() -> None:
     else:
         print(text)
     if not args.no_record:
-        with (ROOT / "bench" / "RESULTS.md").open("a") as f:
-            head = (
-                f"## kriging — {dt.date.today().isoformat()} — {out['machine']}, jax {out['jax']}"
-            )
-            f.write(f"\n{head}\n\n{text}\n")
+        append_result("kriging", f"{out['machine']}, jax {out['jax']}", text)
 
 
 def _table(out: dict[str, Any]) -> str:

@@ -17,10 +17,7 @@ Prints one table (or one JSON object) and appends a dated row to ``bench/RESULTS
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
-import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -30,20 +27,15 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.optimize import minimize
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import append_result, data_root, machine
+
 from jcrowd.io.bvh import read_bvh
 from jcrowd.motion import drop_tpose_frames
 from jcrowd.simplify import analyse_motion, elimination_order, joint_counts, key_posture
 from jcrowd.simplify.levels import Weights, plan_level, position_problem
 from jcrowd.simplify.pipeline import simplify_motion
 from jcrowd.skeleton import forward_kinematics
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _data() -> Path:
-    env = os.environ.get("JCROWD_DATA")
-    base = Path(env) if env else ROOT.parent / "shared" / "data"
-    return base / "cmu" if (base / "cmu").is_dir() else base
 
 
 def _objective(x, x0, problem, w: Weights):
@@ -166,7 +158,7 @@ def main() -> None:
     ap.add_argument("--long-clip", default="walk/07_05.bvh")
     ap.add_argument("--no-record", action="store_true", help="do not append to RESULTS.md")
     args = ap.parse_args()
-    data = _data()
+    data = data_root() / "cmu"
     main_row, (motion, result) = bench_clip(data / "walk" / "07_03.bvh", args.levels, args.repeats)
     long_row, _ = bench_clip(data / args.long_clip, args.levels, args.repeats)
     ref = scipy_levels(motion, args.levels, args.scipy_frames, result)
@@ -182,7 +174,7 @@ def main() -> None:
         "objective_ratio_vs_scipy": float(np.mean(ref["ratios"])),
         "objective_ratio_vs_scipy_max": float(np.max(ref["ratios"])),
         "max_bone_variation_pct": max(lv["bone_length_variation_pct"] for lv in main_row["levels"]),
-        "machine": f"{platform.node()} {platform.machine()} {os.cpu_count()} cpu",
+        "machine": machine(),
         "device": str(jax.devices()[0]),
         "jax": jax.__version__,
     }
@@ -219,13 +211,8 @@ def _table(out: dict) -> str:
 
 
 def _record(out: dict) -> None:
-    path = ROOT / "bench" / "RESULTS.md"
-    if not path.exists():
-        path.write_text("# Benchmark results\n\nOne dated row per run; newest last.\n")
     c = out["clip"]
     row = (
-        f"\n## simplify — {dt.date.today().isoformat()} — {out['machine']}, {out['device']}, "
-        f"jax {out['jax']}\n\n"
         f"| clip | joints×frames | levels | s after compile | compile s | SciPy s (scaled) | "
         f"speed-up | objective ours/SciPy | max bone var % | mean error per level (cm) |\n"
         f"|---|---|---|---|---|---|---|---|---|---|\n"
@@ -245,8 +232,7 @@ def _record(out: dict) -> None:
         + ", ".join(f"{100 * lv['mean_error_m']:.2f}" for lv in lc["levels"])
         + " |\n"
     )
-    with open(path, "a") as f:
-        f.write(row)
+    append_result("simplify", f"{out['machine']}, {out['device']}, jax {out['jax']}", row)
 
 
 if __name__ == "__main__":

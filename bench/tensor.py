@@ -18,10 +18,8 @@ Prints one table (or, with ``--json``, one JSON object whose top-level keys desc
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -34,7 +32,8 @@ import tensorly
 from tensorly.decomposition import tucker as tl_tucker
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import dtw as dtw_bench
+import dtw as dtw_bench  # bench/dtw.py: the DTW sequences and timing
+from common import append_result, data_root, machine
 
 from jcrowd.align import align_to_reference
 from jcrowd.data import load_dataset
@@ -51,14 +50,6 @@ from jcrowd.tensor_model import (
     level_errors,
     storage,
 )
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _data() -> Path:
-    env = os.environ.get("JCROWD_DATA")
-    base = Path(env) if env else ROOT.parent / "shared" / "data"
-    return base if (base / "cmu").is_dir() else base.parent
 
 
 def _stages(folder: Path) -> dict[str, float]:
@@ -148,7 +139,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-record", action="store_true")
     args = ap.parse_args()
-    data = _data()
+    data = data_root()
     walk = bench_dataset(data / "cmu" / "walk", args.repeats)
     c16 = bench_dataset(data / "cmu16", args.repeats)
     dtw_rows = dtw_bench.bench("pose", args.repeats, cycles=True)
@@ -159,7 +150,7 @@ def main() -> None:
         "dtw_rows": dtw_rows,
         "dtw_multiscale_speedup_3000": at3000["speedup"],
         "dtw_multiscale_cost_ratio": at3000["cost_ratio"],
-        "machine": f"{platform.node()} {platform.machine()} {os.cpu_count()} cpu",
+        "machine": machine(),
         "numpy": np.__version__,
         "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
     }
@@ -227,16 +218,12 @@ def _tables(out: dict[str, Any]) -> str:
 def _record(out: dict[str, Any], text: str) -> None:
     import jax
 
-    path = ROOT / "bench" / "RESULTS.md"
-    if not path.exists():
-        path.write_text("# Benchmark results\n\nOne dated row per run; newest last.\n")
-    with path.open("a") as f:
-        f.write(
-            f"\n## tensor — {dt.date.today().isoformat()} — code {dtw_bench._code_version()} — "
-            f"{out['machine']}, numpy {out['numpy']}, jax {jax.__version__} (unused), "
-            f"OpenBLAS threads {out['blas_threads']}\n\n{text}\n"
-        )
-    print(f"appended to {path}", file=sys.stderr)
+    append_result(
+        "tensor",
+        f"{out['machine']}, numpy {out['numpy']}, jax {jax.__version__} (unused), "
+        f"OpenBLAS threads {out['blas_threads']}",
+        text,
+    )
 
 
 if __name__ == "__main__":
