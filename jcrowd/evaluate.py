@@ -32,7 +32,7 @@ from jcrowd.kriging.universal import fit_kriging, normalise_controls, predict
 from jcrowd.model import MotionModel, model_reliability, sample_cores, synthesize_clip
 from jcrowd.motion import Motion, joint_positions
 from jcrowd.samples import CONTROL_NAMES, gait_samples
-from jcrowd.tensor_model import TensorModel, _root_frame
+from jcrowd.tensor_model import TensorModel, root_frame_positions
 
 __all__ = ["METHODS", "evaluate_captures", "foot_skate", "leave_one_clip_out"]
 
@@ -90,8 +90,8 @@ def leave_one_clip_out(
         for method, y in ys.items():
             for j, s in enumerate(np.nonzero(out)[0]):
                 h = float(tensor.heights[s])
-                a = _root_frame(truth[s], tensor, h)
-                b = _root_frame(y[j], tensor, h)
+                a = root_frame_positions(truth[s], tensor, h)
+                b = root_frame_positions(y[j], tensor, h)
                 errors[method].append(
                     (
                         float(np.linalg.norm(a[0] - b[0], axis=-1).mean()),

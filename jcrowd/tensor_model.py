@@ -33,6 +33,7 @@ from jcrowd.data import Clip
 from jcrowd.errors import DataError
 from jcrowd.io.store import load_store, save_store, skeleton_from_json, skeleton_to_json
 from jcrowd.keylevels import StorageReport, key_levels, tucker_storage
+from jcrowd.motion import resample
 from jcrowd.posevec import PoseLayout, decode_pose_vectors, encode_sample, mean_rotations
 from jcrowd.rotation import quat_rotate, yaw_quat
 from jcrowd.samples import CONTROL_NAMES, Sample, gait_samples, reference_skeleton
@@ -48,6 +49,7 @@ __all__ = [
     "level_errors",
     "load_tensor_model",
     "reconstruct_level",
+    "root_frame_positions",
     "save_tensor_model",
     "storage",
 ]
@@ -167,8 +169,6 @@ def build_tensor_model(
         raise DataError(
             f"tensor model: expected at least 2 gait-cycle samples, found {len(samples)}"
         )
-    from jcrowd.motion import resample
-
     skel = reference_skeleton(samples)
     order = elimination_order(
         skel, joint_importance([resample(c.motion, config.fps) for c in clips])
@@ -233,15 +233,21 @@ def level_errors(model: TensorModel, level: int) -> tuple[float, float]:
     joint_err, root_err = [], []
     for s in range(truth.shape[0]):
         h = float(model.heights[s])
-        a = _root_frame(truth[s], model, h)
-        b = _root_frame(approx[s], model, h)
+        a = root_frame_positions(truth[s], model, h)
+        b = root_frame_positions(approx[s], model, h)
         joint_err.append(np.linalg.norm(a[0] - b[0], axis=-1).mean())
         root_err.append(np.linalg.norm(a[1] - b[1]))
     return float(np.mean(joint_err)), float(np.mean(root_err))
 
 
-def _root_frame(y: np.ndarray, model: TensorModel, height: float) -> tuple[np.ndarray, np.ndarray]:
-    motion, _ = decode_pose_vectors(y, model.layout, model.skeleton.scaled(height), height, 60.0)
+def root_frame_positions(
+    y: np.ndarray, model: TensorModel, height: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Decoded joint positions relative to the root in its heading frame ``(T, J-1, 3)``, and the
+    root's position at the last aligned frame (the cycle's displacement), for pose vectors ``y``.
+    """
+    skel = model.skeleton.scaled(height)
+    motion, _ = decode_pose_vectors(y, model.layout, skel, height, model.config.fps)
     _, pos = forward_kinematics(
         motion.skeleton,
         np.asarray(motion.rotations, np.float64),
