@@ -16,6 +16,8 @@ __all__ = [
     "JcrowdError",
     "KrigingError",
     "MotionError",
+    "RenderError",
+    "ScenarioError",
     "SkeletonError",
     "StoreError",
     "TensorError",
@@ -53,6 +55,14 @@ class TensorError(JcrowdError):
 
 class KrigingError(JcrowdError):
     """Samples, controls or a variogram cannot be kriged as asked (too few, not finite, ...)."""
+
+
+class ScenarioError(JcrowdError):
+    """A scenario file (TOML) is invalid: the message names the file and the key path."""
+
+
+class RenderError(JcrowdError):
+    """No rendering context could be made, or a frame cannot be drawn or written as asked."""
 
 
 class StoreError(JcrowdError):
