@@ -8,7 +8,9 @@ so its pose vectors are ``Y(c) = U_P K(c) U_Tᵀ`` (000 Eq. 4 over all aligned f
 
 Controls default to ``(dx, dz, dyaw)`` — the cycle's displacement and turn (000 §5 uses the 2-D
 displacement plus the character's height; a single-subject dataset has no height to vary). The
-kriging model normalises them so the control space is isotropic (001 §6). A synthesized clip
+kriging model normalises them so the control space is isotropic (001 §6). One variogram,
+fitted on the finest level's cores, serves every level, so the kriging weights ``b(c)`` of a
+clip are the same at every level (what lets a crowd agent keep them across LOD changes). A synthesized clip
 is the reference skeleton scaled to ``height``. :func:`synthesize_clip` is pure; fitting runs
 NumPy/JAX on arrays.
 """
@@ -99,14 +101,18 @@ def fit_motion_model(
     idx = [CONTROL_NAMES.index(c) for c in controls]
     rows = np.arange(len(tensor.controls)) if samples is None else np.asarray(samples)
     c = tensor.controls[rows][:, idx]
-    levels = []
+    levels: list[MotionLevel] = []
     for lv in tensor.levels:
         u_p, u_t, u_s = lv.tucker.factors
         cores = sample_cores(lv.tucker.core, u_s[rows])
         dropped = [j for j in range(1, tensor.skeleton.num_joints) if j not in lv.joints]
         u_p = np.array(u_p, np.float64)
         u_p[tensor.layout.joint_elements(dropped)] = 0.0
-        levels.append(MotionLevel(u_p, np.asarray(u_t), fit_kriging(c, cores), lv.joints))
+        # One variogram for the whole model, fitted on the finest level: the kriging weights
+        # b(c) then agree at every level (Γ is the same up to the sill, and b is invariant to
+        # scaling Γ), so a crowd agent stores b once per clip and changes level for free.
+        shared = levels[0].kriging.variogram if levels else None
+        levels.append(MotionLevel(u_p, np.asarray(u_t), fit_kriging(c, cores, shared), lv.joints))
     ranges = np.stack([c.min(axis=0), c.max(axis=0)], axis=1)
     return MotionModel(
         tensor.skeleton,

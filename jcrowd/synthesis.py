@@ -1,0 +1,259 @@
+"""Per-agent, per-level pose synthesis for the crowd step (paper 000 §4.3, Eqs. 4–5, 8).
+
+A clip is fixed by its control vector ``c``; what the step keeps per agent is the clip's
+*mixing vector* ``a = [b(c); 1; ĉ]`` — the kriging weights (001 Eq. 3) followed by the trend
+basis — because the model's one variogram makes ``b(c)`` the same at every level
+(:mod:`jcrowd.model`). At level ``l`` the core is ``K(c) = Σ_k a_k V_k`` with ``V`` the residual
+cores and the trend planes (000 Eq. 8), and the pose vector at aligned frame ``τ`` is
+``y = U_P K(c) w_T(τ)`` with ``w_T(τ)`` the linear interpolation of rows of ``U_T`` (000 Eq. 5).
+
+Reading taken for speed (same sums, another order): ``K(c) w_T(τ) = Σ_k a_k (V_k w_T(τ))``, and
+``V_k U_Tᵀ`` is precomputed per level as a table ``(T, A, R_P)``, so one agent-frame reads two
+table rows and costs ``2·A·R_P + P_l·R_P`` multiply-adds, with no per-agent core in memory
+(a full-level core per agent at 100k agents would be 480 MB, DESIGN §5).
+
+Forward kinematics runs on the level's *kept* joints only: a dropped joint keeps its reference
+rotation, so the chain from a kept joint's nearest kept ancestor is a constant rotation and
+offset folded into the kept joint (003 §5.1: frozen joints follow their parent). Every joint and
+End Site of the full skeleton is then placed rigidly in the frame of its nearest kept joint, so
+a coarse agent is drawn with the whole body, moving only where the level moves it.
+
+Units: the tables give unscaled pose vectors times the layout's element scales; lengths are for
+a 1 m character and are multiplied by the agent's height. Heading ``θ`` faces
+``(sin θ, 0, cos θ)``; + yaw turns left (towards +x).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from jcrowd.kriging.universal import KrigingModel, kriging_weights
+from jcrowd.model import MotionModel
+from jcrowd.rotation import quat_from_expmap, quat_mul, quat_rotate, yaw_quat
+from jcrowd.skeleton import Skeleton, forward_kinematics
+
+__all__ = [
+    "Decoders",
+    "LevelDecoder",
+    "RootRates",
+    "build_decoders",
+    "clip_weights",
+    "decode_coeffs",
+    "level_points",
+    "pose_from_coeffs",
+    "root_rates",
+]
+
+_HI = jax.lax.Precision.HIGHEST
+_ROOT_ROWS = 7  # height, velocity (2), yaw rate, tilt (3): the first rows of every pose vector
+
+
+class LevelDecoder(eqx.Module):
+    """What one level needs to turn ``(a, τ)`` into joint positions.
+
+    Attributes:
+        table: ``(T, A, R_P)``: ``V_k U_Tᵀ`` per aligned frame, the sum's terms (see module doc).
+        u_pose: ``(P_l, R_P)`` scaled rows of ``U_P`` the level decodes: the 7 root rows, the
+            kept joints' exp-map rows, then ΔA.
+        local_ref: ``(K, 4)`` constant left factor of each kept joint's local rotation (the
+            dropped ancestors' reference rotations, then the joint's own reference).
+        skeleton: the kept joints as a skeleton (offsets through dropped ancestors), 1 m tall.
+        anchor: static, nearest kept joint (index into the kept list) of every output point.
+        point_offset: ``(J + E, 3)`` each output point in its anchor's frame (1 m character).
+    """
+
+    table: Float[Array, "T A R"]
+    u_pose: Float[Array, "P R"]
+    local_ref: Float[Array, "K 4"]
+    skeleton: Skeleton
+    anchor: tuple[int, ...] = eqx.field(static=True)
+    point_offset: Float[Array, "N 3"]
+
+    @property
+    def num_kept(self) -> int:
+        return self.skeleton.num_joints
+
+
+class Decoders(eqx.Module):
+    """Every level's decoder plus the shared kriging (level 0's system) and clip constants.
+
+    Attributes:
+        kriging: the kriging model whose weights serve every level.
+        levels: finest first.
+        frames: T, aligned frames per cycle (a cycle runs over τ ∈ [0, T − 1]).
+        fps: the model clock (sample frames per second) that ΔA counts in.
+    """
+
+    kriging: KrigingModel
+    levels: tuple[LevelDecoder, ...]
+    frames: int = eqx.field(static=True)
+    fps: float = eqx.field(static=True)
+
+    @property
+    def mix_size(self) -> int:
+        return int(self.levels[0].table.shape[1])
+
+
+def _chain(
+    skeleton: Skeleton, reference: np.ndarray, kept: set[int], j: int
+) -> tuple[int, np.ndarray, np.ndarray]:
+    """Nearest kept ancestor of ``j``; the rotation of ``j``'s parent frame and ``j``'s position,
+    both in that ancestor's frame, through dropped joints (each at its reference rotation)."""
+    path = []
+    p = skeleton.parents[j]
+    while p not in kept:
+        path.append(p)
+        p = skeleton.parents[p]
+    rot = np.array([1.0, 0.0, 0.0, 0.0])
+    off = np.zeros(3)
+    offsets = np.asarray(skeleton.offsets, np.float64)
+    for d in reversed(path):  # from just below the kept ancestor down to j's parent
+        off = off + quat_rotate(rot, offsets[d])
+        rot = quat_mul(rot, reference[d])
+    off = off + quat_rotate(rot, offsets[j])
+    return p, rot, off
+
+
+def _level_decoder(model: MotionModel, level: int) -> LevelDecoder:
+    lv = model.levels[level]
+    k = lv.kriging
+    r_p, r_t = lv.u_pose.shape[1], lv.u_time.shape[1]
+    terms = np.concatenate(
+        [np.asarray(k.residuals, np.float64), np.asarray(k.trend, np.float64)], axis=0
+    ).reshape(-1, r_p, r_t)
+    table = np.einsum("ars,ts->tar", terms, np.asarray(lv.u_time, np.float64))
+    layout, skel = model.layout, model.skeleton
+    kept = [0, *sorted(j for j in lv.joints if j != 0)]
+    rows = np.concatenate(
+        [np.arange(_ROOT_ROWS), layout.joint_elements(kept[1:]), [layout.delta_a]]
+    ).astype(int)
+    u_pose = (np.asarray(lv.u_pose, np.float64) * layout.scale[:, None])[rows]
+    reference = np.asarray(layout.reference, np.float64)
+    kept_set = set(kept)
+    parents = [-1]
+    offsets = [np.asarray(skel.offsets, np.float64)[0]]
+    local_ref = [np.array([1.0, 0.0, 0.0, 0.0])]
+    for j in kept[1:]:
+        anc, rot, off = _chain(skel, reference, kept_set, j)
+        parents.append(kept.index(anc))
+        offsets.append(off)
+        local_ref.append(quat_mul(rot, reference[j]))
+    anchor, point_offset = [], []
+    end_offsets = np.asarray(skel.end_offsets_or_empty(), np.float64)
+    ends = list(zip(skel.end_parents, end_offsets, strict=True))
+    for j in range(skel.num_joints):
+        if j in kept_set:
+            anchor.append(kept.index(j))
+            point_offset.append(np.zeros(3))
+        else:
+            anc, _, off = _chain(skel, reference, kept_set, j)
+            anchor.append(kept.index(anc))
+            point_offset.append(off)
+    for parent, end in ends:
+        # An End Site hangs in its parent joint's frame: the parent's own (dynamic) frame if it
+        # is kept, else a constant frame inside the parent's nearest kept ancestor.
+        if parent in kept_set:
+            anchor.append(kept.index(parent))
+            point_offset.append(end)
+        else:
+            anc, rot, off = _chain(skel, reference, kept_set, parent)
+            anchor.append(kept.index(anc))
+            point_offset.append(off + quat_rotate(quat_mul(rot, reference[parent]), end))
+    names = tuple(skel.names[j] for j in kept)
+    f32 = np.float32
+    return LevelDecoder(
+        table=jnp.asarray(table, f32),
+        u_pose=jnp.asarray(u_pose, f32),
+        local_ref=jnp.asarray(np.stack(local_ref), f32),
+        skeleton=Skeleton(names, tuple(parents), jnp.asarray(np.stack(offsets), f32)),
+        anchor=tuple(anchor),
+        point_offset=jnp.asarray(np.stack(point_offset), f32),
+    )
+
+
+def build_decoders(model: MotionModel) -> Decoders:
+    """Precompute every level's decoder (host code, once per model)."""
+    levels = tuple(_level_decoder(model, level) for level in range(len(model.levels)))
+    frames = int(model.levels[0].u_time.shape[0])
+    return Decoders(model.levels[0].kriging, levels, frames, float(model.fps))
+
+
+def point_parents(model: MotionModel) -> tuple[int, ...]:
+    """Parent of every output point (joints, then End Sites) for drawing bones; -1 for the root."""
+    skel = model.skeleton
+    return tuple(skel.parents) + tuple(skel.end_parents)
+
+
+# ----------------------------------------------------------------------------- per agent
+
+
+def clip_weights(decoders: Decoders, c: Float[Array, " d"]) -> Float[Array, " A"]:
+    """The mixing vector ``a = [b(c); 1; ĉ]`` of the clip with controls ``c`` (one agent)."""
+    k = decoders.kriging
+    b, _ = kriging_weights(k, c)
+    x = (jnp.asarray(c, k.controls.dtype) - k.control_mean) / k.control_scale
+    return jnp.concatenate([b, jnp.ones((1,), x.dtype), x])
+
+
+def decode_coeffs(
+    level: LevelDecoder, a: Float[Array, " A"], tau: Float[Array, ""]
+) -> Float[Array, " R"]:
+    """``g = K(c) w_T(τ)`` (000 Eqs. 5, 8) for one agent; τ is clamped to ``[0, T − 1]``."""
+    last = level.table.shape[0] - 1
+    tau = jnp.clip(jnp.asarray(tau, level.table.dtype), 0.0, float(last))
+    i0 = jnp.minimum(jnp.floor(tau), float(last - 1))
+    frac = tau - i0
+    i0 = i0.astype(jnp.int32)
+    rows = jax.lax.dynamic_slice_in_dim(level.table, i0, 2, axis=0)  # (2, A, R)
+    g = jnp.einsum("a,kar->kr", a, rows, precision=_HI)
+    return g[0] + frac * (g[1] - g[0])
+
+
+def pose_from_coeffs(level: LevelDecoder, g: Float[Array, " R"]) -> Float[Array, " P"]:
+    """The level's pose-vector rows ``y = U_P g`` (scaled): root rows, kept joints, ΔA."""
+    return jnp.dot(level.u_pose, g, precision=_HI)
+
+
+@dataclass(frozen=True)
+class RootRates:
+    """Root motion per aligned frame, read from a pose vector (1 m character units)."""
+
+    velocity: Array  # (2,) (x, z) in the heading frame, per aligned frame
+    yaw_rate: Array  # radians per aligned frame
+    delta_a: Array  # sample frames per aligned frame (> 0)
+
+
+def root_rates(y: Float[Array, " P"]) -> RootRates:
+    """Velocity, yaw rate and ΔA of a level pose vector (ΔA kept ≥ 1e-3 so time moves)."""
+    return RootRates(y[1:3], y[3], jnp.maximum(y[-1], 1e-3))
+
+
+def level_points(
+    level: LevelDecoder,
+    y: Float[Array, " P"],
+    root_xz: Float[Array, " 2"],
+    heading: Float[Array, ""],
+    height: Float[Array, ""],
+) -> Float[Array, "N 3"]:
+    """World positions of every joint and End Site of one agent at this level.
+
+    The root sits at ``(x, y_h · height, z)`` with rotation ``yaw(heading) ⊗ exp(tilt)``; the kept
+    joints' local rotations are ``local_ref ⊗ exp(e_j)``; FK per depth (:func:`forward_kinematics`)
+    on the level skeleton, then each point rigidly in its anchor's frame.
+    """
+    kept = level.num_kept
+    root = quat_mul(yaw_quat(heading), quat_from_expmap(y[4:7]))
+    e = y[_ROOT_ROWS : _ROOT_ROWS + 3 * (kept - 1)].reshape(kept - 1, 3)
+    joints = quat_mul(level.local_ref[1:], quat_from_expmap(e))
+    local = jnp.concatenate([root[None], joints], axis=0)
+    rot, pos = forward_kinematics(level.skeleton, local, jnp.zeros(3, local.dtype))
+    anchor = np.asarray(level.anchor)
+    pts = pos[anchor] + quat_rotate(rot[anchor], level.point_offset)
+    base = jnp.stack([root_xz[0], y[0] * height, root_xz[1]])
+    return base + height * pts

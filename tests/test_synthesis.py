@@ -1,0 +1,109 @@
+"""Per-agent synthesis (jcrowd.synthesis) against the offline decode of jcrowd.model."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jcrowd import load_default_model
+from jcrowd.model import level_pose_vectors
+from jcrowd.posevec import decode_pose_vectors
+from jcrowd.skeleton import end_site_positions, forward_kinematics
+from jcrowd.synthesis import (
+    build_decoders,
+    clip_weights,
+    decode_coeffs,
+    level_points,
+    pose_from_coeffs,
+)
+
+
+@pytest.fixture(scope="module")
+def setup():
+    model = load_default_model()
+    return model, build_decoders(model)
+
+
+def _reference_points(model, c, level, height):
+    """Oracle: the offline path — kriged pose vectors, full decode, full-skeleton FK."""
+    y = level_pose_vectors(model, np.asarray(c), level)
+    skel = model.skeleton.scaled(height)
+    motion, _ = decode_pose_vectors(y, model.layout, skel, height, model.fps)
+    rot, pos = forward_kinematics(
+        skel, np.asarray(motion.rotations, np.float64), np.asarray(motion.root_positions)
+    )
+    ends = end_site_positions(skel, rot, pos)
+    yaw = np.concatenate([[0.0], np.cumsum(y[:-1, model.layout.yaw_rate])])
+    return np.concatenate([pos, ends], axis=1), np.asarray(motion.root_positions), yaw
+
+
+@pytest.mark.parametrize("level", [0, 2, 5])
+def test_agent_decode_equals_offline_synthesis(setup, level):
+    model, dec = setup
+    c = np.array([0.1, 1.2, 0.4])
+    height = 1.7
+    ref, root, yaw = _reference_points(model, c, level, height)
+    a = clip_weights(dec, jnp.asarray(c, jnp.float32))
+    lv = dec.levels[level]
+    for t in (0, 17, 50, 99):
+        y = pose_from_coeffs(lv, decode_coeffs(lv, a, jnp.float32(t)))
+        pts = level_points(lv, y, jnp.asarray(root[t, [0, 2]]), jnp.float32(yaw[t]), height)
+        # float32 decode (tables, FK) vs the float64 offline path on a 1.7 m body: 1 mm.
+        np.testing.assert_allclose(np.asarray(pts), ref[t], atol=1e-3)
+
+
+def test_fractional_tau_interpolates_rows(setup):
+    """w_T(τ) is linear between rows (000 Eq. 5): g(t + f) = (1 − f) g(t) + f g(t + 1)."""
+    _, dec = setup
+    lv = dec.levels[1]
+    a = clip_weights(dec, jnp.asarray([0.0, 1.3, -0.2], jnp.float32))
+    g0, g1 = decode_coeffs(lv, a, jnp.float32(10)), decode_coeffs(lv, a, jnp.float32(11))
+    g = decode_coeffs(lv, a, jnp.float32(10.25))
+    np.testing.assert_allclose(
+        np.asarray(g), 0.75 * np.asarray(g0) + 0.25 * np.asarray(g1), rtol=1e-5, atol=1e-5
+    )
+
+
+def test_weights_are_level_independent(setup):
+    """One variogram per model: the kriging operators of every level are identical."""
+    model, _ = setup
+    ops = [np.asarray(lv.kriging.gamma_operator) for lv in model.levels]
+    for op in ops[1:]:
+        np.testing.assert_array_equal(op, ops[0])
+
+
+def test_vmap_equals_loop_and_jit_equals_eager(setup):
+    _, dec = setup
+    lv = dec.levels[3]
+    rng = np.random.default_rng(0)
+    c = jnp.asarray(rng.uniform([-0.3, 0.9, -0.8], [0.3, 1.5, 0.8], (5, 3)), jnp.float32)
+    tau = jnp.asarray(rng.uniform(0, 99, 5), jnp.float32)
+
+    def one(ci, ti):
+        y = pose_from_coeffs(lv, decode_coeffs(lv, clip_weights(dec, ci), ti))
+        return level_points(lv, y, jnp.zeros(2), jnp.float32(0.3), jnp.float32(1.6))
+
+    batched = jax.jit(jax.vmap(one))(c, tau)
+    loop = np.stack([np.asarray(one(ci, ti)) for ci, ti in zip(c, tau, strict=True)])
+    # Same float32 operations, fused differently by XLA: a few ulps of metre-sized values.
+    np.testing.assert_allclose(np.asarray(batched), loop, atol=2e-6)
+
+
+def test_coarse_level_keeps_bone_lengths(setup):
+    """Frozen joints ride rigidly on their kept ancestor: every bone keeps its rest length."""
+    model, dec = setup
+    lv = dec.levels[5]
+    a = clip_weights(dec, jnp.asarray([0.0, 1.2, 0.0], jnp.float32))
+    y = pose_from_coeffs(lv, decode_coeffs(lv, a, jnp.float32(33.3)))
+    pts = np.asarray(level_points(lv, y, jnp.zeros(2), jnp.float32(0.0), jnp.float32(1.0)))
+    skel = model.skeleton
+    parents = list(skel.parents) + list(skel.end_parents)
+    rest = np.concatenate(
+        [np.asarray(skel.offsets), np.asarray(skel.end_offsets_or_empty())], axis=0
+    )
+    for i, p in enumerate(parents):
+        if p >= 0:
+            length = np.linalg.norm(pts[i] - pts[p])
+            assert length == pytest.approx(np.linalg.norm(rest[i]), abs=1e-5)
