@@ -1,0 +1,154 @@
+"""Level of detail: importance, distance levels with hysteresis, frustum culling and a budget.
+
+Paper 000 §5.1 picks an agent's accuracy level from its distance to the camera (full detail
+nearer than 30 m, then coarser with distance); paper 003 §3 drops joints the same way. On top
+of that sits a *budget* like a game engine's animation budget allocator (DESIGN §5): every
+level has a static capacity; agents are ranked by importance and level 0 is filled first, then
+level 1, …, each agent at least as coarse as its distance allows. Overflow goes coarser and is
+counted, never dropped. Shapes are static, so the step compiles once whatever the histogram.
+
+Importance is either closeness (``-distance``) or the projected height in pixels of a
+``height``-metre character; both rank agents in the same order for one camera except for the
+pixel measure's use of depth along the view axis instead of Euclidean distance.
+
+Conventions: positions are ``(x, y, z)`` metres, y up; the camera looks from ``eye`` to
+``target`` with a vertical field of view ``fov_deg`` and aspect ``width / height``.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+__all__ = [
+    "Buckets",
+    "CameraView",
+    "assign_buckets",
+    "distance_levels",
+    "in_frustum",
+    "screen_height_px",
+]
+
+
+class CameraView(eqx.Module):
+    """A pinhole camera as traced arrays (changing it never recompiles the step)."""
+
+    eye: Float[Array, " 3"]
+    target: Float[Array, " 3"]
+    fov_deg: Float[Array, ""]
+    aspect: Float[Array, ""]
+    height_px: Float[Array, ""]
+
+    def basis(self) -> tuple[Array, Array, Array]:
+        """Unit forward, right and up vectors of the camera (right-handed, y up)."""
+        fwd = self.target - self.eye
+        fwd = fwd / jnp.linalg.norm(fwd)
+        right = jnp.cross(fwd, jnp.array([0.0, 1.0, 0.0], fwd.dtype))
+        right = right / jnp.maximum(jnp.linalg.norm(right), 1e-9)
+        up = jnp.cross(right, fwd)
+        return fwd, right, up
+
+
+def _view_coords(view: CameraView, points: Float[Array, "N 3"]) -> tuple[Array, Array, Array]:
+    fwd, right, up = view.basis()
+    d = points - view.eye
+    return d @ fwd, d @ right, d @ up
+
+
+def in_frustum(
+    view: CameraView, points: Float[Array, "N 3"], radius: float = 1.0, far: float = 1e4
+) -> Bool[Array, " N"]:
+    """Whether a sphere of ``radius`` around each point touches the view frustum."""
+    depth, x, y = _view_coords(view, points)
+    tan_v = jnp.tan(jnp.deg2rad(view.fov_deg) / 2)
+    tan_h = tan_v * view.aspect
+    # Distance of the centre outside each side plane, measured perpendicular to the plane.
+    out_h = (jnp.abs(x) - depth * tan_h) / jnp.sqrt(1 + tan_h**2)
+    out_v = (jnp.abs(y) - depth * tan_v) / jnp.sqrt(1 + tan_v**2)
+    return (depth > -radius) & (depth < far) & (out_h < radius) & (out_v < radius)
+
+
+def screen_height_px(
+    view: CameraView, points: Float[Array, "N 3"], height: Float[Array, " N"]
+) -> Float[Array, " N"]:
+    """Projected height in pixels of a ``height``-metre character standing at each point."""
+    depth, _, _ = _view_coords(view, points)
+    tan_v = jnp.tan(jnp.deg2rad(view.fov_deg) / 2)
+    return height / (2 * jnp.maximum(depth, 1e-3) * tan_v) * view.height_px
+
+
+def distance_levels(
+    distance: Float[Array, " N"],
+    previous: Int[Array, " N"],
+    thresholds: Float[Array, " L1"],
+    hysteresis: float,
+) -> Int[Array, " N"]:
+    """The finest level each agent's distance allows, with hysteresis.
+
+    Without hysteresis the level is the number of thresholds the distance exceeds. With it, an
+    agent only goes coarser once past ``threshold + hysteresis`` and finer once nearer than
+    ``threshold − hysteresis``: the new level is ``previous`` clipped to that band, so an agent
+    held anywhere inside the band never changes level.
+    """
+    thresholds = jnp.asarray(thresholds, distance.dtype)
+    lo = jnp.sum(distance[:, None] > thresholds + hysteresis, axis=1)
+    hi = jnp.sum(distance[:, None] > thresholds - hysteresis, axis=1)
+    return jnp.clip(previous, lo, hi).astype(jnp.int32)
+
+
+class Buckets(eqx.Module):
+    """Per-level slots of a budgeted assignment.
+
+    Attributes:
+        slots: one ``(C_l,)`` int32 array per level: agent ids, ``N`` in unused slots.
+        valid: one ``(C_l,)`` bool array per level.
+        level: ``(N,)`` int32 final level; ``L`` (one past the last) for agents not placed.
+        overflow: agents placed coarser than their distance allowed, because of capacity.
+        unplaced: eligible agents that fit in no level (0 when the last capacity covers all).
+    """
+
+    slots: tuple[Int[Array, " C"], ...]
+    valid: tuple[Bool[Array, " C"], ...]
+    level: Int[Array, " N"]
+    overflow: Int[Array, ""]
+    unplaced: Int[Array, ""]
+
+
+def assign_buckets(
+    min_level: Int[Array, " N"],
+    importance: Float[Array, " N"],
+    eligible: Bool[Array, " N"],
+    capacities: tuple[int, ...],
+) -> Buckets:
+    """Fill level 0 with the most important eligible agents, then level 1, … (static shapes).
+
+    Level ``l`` takes the ``C_l`` most important agents not yet placed whose ``min_level`` is
+    at most ``l``. That equals the greedy rule "in order of importance, each agent takes the
+    first level at least as coarse as it may be that still has room". A level whose capacity
+    covers every agent is filled by compaction (no ranking).
+    """
+    n = min_level.shape[0]
+    placed = ~eligible
+    level = jnp.full((n,), len(capacities), jnp.int32)
+    slots, valid = [], []
+    neg = jnp.asarray(-jnp.inf, importance.dtype)
+    for lv, cap in enumerate(capacities):
+        cand = (~placed) & (min_level <= lv)
+        if cap >= n:
+            (idx,) = jnp.nonzero(cand, size=cap, fill_value=n)
+            ok = idx < n
+        else:
+            key = jnp.where(cand, importance, neg)
+            top, idx = jax.lax.top_k(key, cap)
+            ok = top > neg
+            idx = jnp.where(ok, idx, n).astype(jnp.int32)
+        idx = idx.astype(jnp.int32)
+        placed = placed.at[idx].set(True, mode="drop")
+        level = level.at[idx].set(lv, mode="drop")
+        slots.append(idx)
+        valid.append(ok)
+    overflow = jnp.sum(eligible & (level < len(capacities)) & (level > min_level))
+    unplaced = jnp.sum(eligible & (level == len(capacities)))
+    return Buckets(tuple(slots), tuple(valid), level, overflow, unplaced)
