@@ -140,10 +140,18 @@ def assign_buckets(
             (idx,) = jnp.nonzero(cand, size=cap, fill_value=n)
             ok = idx < n
         else:
-            key = jnp.where(cand, importance, neg)
-            top, idx = jax.lax.top_k(key, cap)
-            ok = top > neg
-            idx = jnp.where(ok, idx, n).astype(jnp.int32)
+            # Rank only when the candidates overflow the level (one branch runs: the predicate
+            # is a scalar outside any vmap); otherwise every candidate fits, in agent order.
+            def ranked(cand: Array, cap: int = cap) -> tuple[Array, Array]:
+                top, idx = jax.lax.top_k(jnp.where(cand, importance, neg), cap)
+                ok = top > neg
+                return jnp.where(ok, idx, n).astype(jnp.int32), ok
+
+            def compact(cand: Array, cap: int = cap) -> tuple[Array, Array]:
+                (idx,) = jnp.nonzero(cand, size=cap, fill_value=n)
+                return idx.astype(jnp.int32), idx < n
+
+            idx, ok = jax.lax.cond(jnp.sum(cand) > cap, ranked, compact, cand)
         idx = idx.astype(jnp.int32)
         placed = placed.at[idx].set(True, mode="drop")
         level = level.at[idx].set(lv, mode="drop")

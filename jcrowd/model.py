@@ -10,9 +10,9 @@ Controls default to ``(dx, dz, dyaw)`` — the cycle's displacement and turn (00
 displacement plus the character's height; a single-subject dataset has no height to vary). The
 kriging model normalises them so the control space is isotropic (001 §6). One variogram,
 fitted on the finest level's cores, serves every level, so the kriging weights ``b(c)`` of a
-clip are the same at every level (what lets a crowd agent keep them across LOD changes). A synthesized clip
-is the reference skeleton scaled to ``height``. :func:`synthesize_clip` is pure; fitting runs
-NumPy/JAX on arrays.
+clip are the same at every level (what lets a crowd agent keep them across LOD changes).
+A synthesized clip is the reference skeleton scaled to ``height``. :func:`synthesize_clip` is
+pure; fitting runs NumPy/JAX on arrays.
 """
 
 from __future__ import annotations

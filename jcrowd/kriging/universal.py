@@ -45,9 +45,8 @@ from jcrowd.kriging.system import (
     fit_trend,
     system_operators,
 )
-from jcrowd.kriging.variogram import Estimator, Lag, as_controls
+from jcrowd.kriging.variogram import Estimator, Lag, as_controls, spherical, stable
 from jcrowd.kriging.variogram import semivariogram as _gamma
-from jcrowd.kriging.variogram import spherical, stable
 from jcrowd.kriging.variogram_fit import VariogramFit, make_variogram
 
 __all__ = [
@@ -61,6 +60,7 @@ __all__ = [
     "predict_from_weights",
     "prediction_variance",
     "reliability",
+    "reliability_one",
 ]
 
 _HIGHEST = jax.lax.Precision.HIGHEST
@@ -303,7 +303,8 @@ def _kriging_variance_one(model: KrigingModel, c: jax.Array) -> jax.Array:
     return jnp.dot(b, g, precision=_HIGHEST) + jnp.dot(mu, f, precision=_HIGHEST)
 
 
-def _reliability_one(model: KrigingModel, c: jax.Array) -> jax.Array:
+def reliability_one(model: KrigingModel, c: Float[Any, " d"]) -> jax.Array:
+    """ρ(c) for one query, pure and unchecked (the kernel :func:`reliability` batches)."""
     sill = model.variogram.theta[0] + model.variogram.theta[1]
     return 1.0 - _prediction_variance_one(model, c) / sill
 
@@ -405,4 +406,4 @@ def kriging_variance(model: KrigingModel, c: Float[Any, "*Q d"]) -> Float[jax.Ar
 @eqx.filter_jit
 def reliability(model: KrigingModel, c: Float[Any, "*Q d"]) -> Float[jax.Array, "*Q"]:
     """ρ(c) = 1 − σ²(c) / (θ0 + θ1) (paper 001 App. B): 1 at samples, 0 where uncorrelated."""
-    return _batched(_reliability_one, model, c)
+    return _batched(reliability_one, model, c)

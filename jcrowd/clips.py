@@ -1,0 +1,151 @@
+"""Clip scheduling: the next gait cycle's control parameters from an agent's path (000 §5.2).
+
+When an agent passes the middle of its current cycle it chooses the next one, so near agents
+can blend it in over the second half (:mod:`jcrowd.crowd`). The choice, for one agent:
+
+1. Predict where the current cycle ends: its start pose moved by the cycle's own controls
+   ``(dx, dz, dyaw)`` (in the heading frame at the cycle start: z forward, x left, + yaw left).
+2. Aim at the current waypoint from there: the turn ``dyaw`` is the bearing of the waypoint,
+   clamped to the model's range, so a 90° corner is walked as the captures walk it (the default
+   model covers about ±90° per cycle) instead of by rotating the root.
+3. A turning cycle's displacement is the chord of an arc: stride ``L`` (speed × the model's
+   median cycle duration) at half the turn, ``(dx, dz) = L (sin(dyaw/2), cos(dyaw/2))``.
+4. Clamp into the model's control box, and where the kriging reliability ρ (001 App. B) falls
+   below a threshold, pull the controls half way towards the nearest sample (the reliable
+   region is not convex, so a box alone does not keep the prediction trustworthy).
+
+Controls named ``speed`` or ``height`` (if the model has them) take the agent's own values.
+Everything here is written for one agent and batched with ``vmap`` by the caller.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from jcrowd.errors import KrigingError
+from jcrowd.kriging.universal import reliability_one
+from jcrowd.model import MotionModel
+from jcrowd.synthesis import Decoders, build_decoders, clip_weights
+
+__all__ = ["CrowdModel", "build_crowd_model", "choose_controls", "local_to_world", "next_clip"]
+
+
+class CrowdModel(eqx.Module):
+    """A motion model prepared for the crowd step.
+
+    Attributes:
+        decoders: per-level decoders and the shared kriging.
+        lo, hi: ``(d,)`` control box (the samples' range).
+        sample_controls: ``(S, d)`` the samples' controls (for the reliability fallback).
+        duration: ``(A,)`` cycle duration in model frames as a linear function of a clip's
+            mixing vector (Σ ΔA over the aligned frames, 001 §3.5).
+        cycle_seconds: the samples' median cycle duration (s).
+        index: static positions of ``dx, dz, dyaw, speed, height`` in the controls (-1: absent).
+    """
+
+    decoders: Decoders
+    lo: Float[Array, " d"]
+    hi: Float[Array, " d"]
+    sample_controls: Float[Array, "S d"]
+    duration: Float[Array, " A"]
+    cycle_seconds: float = eqx.field(static=True)
+    index: tuple[int, int, int, int, int] = eqx.field(static=True)
+
+    @property
+    def frames(self) -> int:
+        return self.decoders.frames
+
+
+def build_crowd_model(model: MotionModel) -> CrowdModel:
+    """Prepare ``model`` for the step; it must krige over ``dx``, ``dz`` and ``dyaw``."""
+    names = model.control_names
+    missing = [c for c in ("dx", "dz", "dyaw") if c not in names]
+    if missing:
+        raise KrigingError(
+            f"crowd: the model must krige over dx, dz and dyaw to follow paths, found {names}"
+        )
+    index = tuple(names.index(c) if c in names else -1 for c in ("dx", "dz", "dyaw"))
+    index += tuple(names.index(c) if c in names else -1 for c in ("speed", "height"))
+    dec = build_decoders(model)
+    lv = dec.levels[0]
+    cores = np.asarray(lv.cores, np.float64).reshape(-1, *lv.ranks)
+    delta_a = np.einsum(
+        "r,ars,ts->ta", np.asarray(lv.u_pose)[-1], cores, np.asarray(lv.u_time, np.float64)
+    )
+    duration = delta_a[:-1].sum(axis=0)  # frames 0..T-2 advance the clock (posevec decode)
+    k = dec.kriging
+    samples = np.asarray(k.controls)
+    s = len(samples)
+    basis = (samples - np.asarray(k.control_mean)) / np.asarray(k.control_scale)
+    per_sample = duration[:s] + duration[s] + basis @ duration[s + 1 :]
+    cycle_seconds = float(np.median(per_sample) / model.fps)
+    ranges = np.asarray(model.control_ranges, np.float32)
+    return CrowdModel(
+        dec,
+        jnp.asarray(ranges[:, 0]),
+        jnp.asarray(ranges[:, 1]),
+        jnp.asarray(samples, jnp.float32),
+        jnp.asarray(duration, jnp.float32),
+        cycle_seconds,
+        index,  # type: ignore[arg-type]
+    )
+
+
+def local_to_world(v: Float[Array, "... 2"], heading: Float[Array, ...]) -> Array:
+    """Rotate ``(x, z)`` from a heading frame (z forward, x left) into the world."""
+    c, s = jnp.cos(heading), jnp.sin(heading)
+    return jnp.stack([v[..., 0] * c + v[..., 1] * s, -v[..., 0] * s + v[..., 1] * c], axis=-1)
+
+
+def choose_controls(
+    cm: CrowdModel,
+    position: Float[Array, " 2"],
+    heading: Float[Array, ""],
+    target: Float[Array, " 2"],
+    speed: Float[Array, ""],
+    height: Float[Array, ""],
+    min_reliability: float,
+) -> Float[Array, " d"]:
+    """Controls of a cycle starting at ``(position, heading)`` that walks towards ``target``."""
+    ix, iz, iyaw, ispeed, iheight = cm.index
+    v = target - position
+    fwd = v[0] * jnp.sin(heading) + v[1] * jnp.cos(heading)
+    left = v[0] * jnp.cos(heading) - v[1] * jnp.sin(heading)
+    turn = jnp.clip(jnp.arctan2(left, fwd), cm.lo[iyaw], cm.hi[iyaw])
+    stride = speed * cm.cycle_seconds
+    c = (cm.lo + cm.hi) / 2
+    c = c.at[ix].set(stride * jnp.sin(turn / 2)).at[iz].set(stride * jnp.cos(turn / 2))
+    c = c.at[iyaw].set(turn)
+    if ispeed >= 0:
+        c = c.at[ispeed].set(speed)
+    if iheight >= 0:
+        c = c.at[iheight].set(height)
+    c = jnp.clip(c, cm.lo, cm.hi)
+    k = cm.decoders.kriging
+    d2 = jnp.sum(((cm.sample_controls - c) / k.control_scale) ** 2, axis=1)
+    nearest = cm.sample_controls[jnp.argmin(d2)]
+    rho = reliability_one(k, c)
+    return jnp.where(rho < min_reliability, 0.5 * (c + nearest), c)
+
+
+def next_clip(
+    cm: CrowdModel,
+    origin: Float[Array, " 3"],
+    control: Float[Array, " d"],
+    target: Float[Array, " 2"],
+    speed: Float[Array, ""],
+    height: Float[Array, ""],
+    min_reliability: float,
+) -> tuple[Array, Array, Array]:
+    """The next cycle for an agent whose current cycle started at ``origin = (x, z, heading)``.
+
+    Returns ``(controls (d,), mixing vector a (A,), duration in model frames)``.
+    """
+    ix, iz, iyaw = cm.index[:3]
+    end = origin[:2] + local_to_world(jnp.stack([control[ix], control[iz]]), origin[2])
+    c = choose_controls(cm, end, origin[2] + control[iyaw], target, speed, height, min_reliability)
+    a = clip_weights(cm.decoders, c)
+    return c, a, jnp.dot(a, cm.duration)

@@ -1,0 +1,322 @@
+"""The crowd step: one compiled function advancing every agent (DESIGN §5, paper 000 §4.3, §5).
+
+``step(cm, config, state, view, dt) -> (state, frame)``:
+
+1. **LOD** (:mod:`jcrowd.lod`): agents outside the view frustum are culled; the others get the
+   finest level their camera distance allows (with hysteresis) and are bucketed into the
+   levels' static capacities by importance.
+2. **Synthesis** per level (:mod:`jcrowd.synthesis`), ``vmap`` over the level's bucket padded to
+   its capacity: the pose at phase τ, blended with the next clip for levels ≤
+   ``blend_max_level``; FK on the level's skeleton; the root advances by the decoded velocity
+   and yaw rate, and τ by ``dt · fps / ΔA(τ)`` (the inverse time-warp, 001 §3.5).
+3. **Culled agents** advance their root only, by dead reckoning along the arc their clip's
+   controls ``(dx, dz, dyaw)`` describe, at the clip's mean rate (000 §4.3: "only the position
+   and orientation of the root node are computed ... in an invisible area").
+4. **Clips** (:mod:`jcrowd.clips`): an agent passing the middle of its cycle chooses the next
+   (at most ``refresh`` agents per step; the rest wait a step and are counted); at the cycle's
+   end the next clip takes over.
+
+Blending reading (000 §5 "blending the second half of the synthesized motion with the first
+half of the following motion"): the paper's clips are two strides, ours one gait cycle, so the
+phase-aligned reading is taken: over the old cycle's second half the pose eases (smoothstep)
+from the old clip to the new clip *at the same phase*, and at the cycle end the new clip
+continues from phase 0. Far levels switch at the cycle end without blending.
+
+Agents at the end of a non-looped path stop being ``alive`` (they leave the crowd; the count is
+in the frame). Everything has a static shape; no host round trip inside a step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+from jcrowd.clips import CrowdModel, local_to_world, next_clip
+from jcrowd.errors import JcrowdError
+from jcrowd.lod import CameraView, assign_buckets, distance_levels, in_frustum, screen_height_px
+from jcrowd.synthesis import decode_coeffs, level_points, pose_from_coeffs, root_rates
+
+__all__ = ["CrowdState", "Frame", "StepConfig", "default_capacities", "init_state", "step"]
+
+
+@dataclass(frozen=True)
+class StepConfig:
+    """Static settings of the step (changing one compiles a new step).
+
+    Attributes:
+        capacities: agents per level (finest first); the last usually covers every agent.
+        thresholds: distances (m) past which an agent is at least level i + 1.
+        hysteresis: band (m) round each threshold inside which the level does not change.
+        blend_max_level: levels ≤ this blend clips; coarser ones switch at the frame.
+        refresh: clips chosen per step at most (0: ``N / 16 + 64``, about twice the rate at
+            which 1 s cycles end at 30 steps per second).
+        reach: a waypoint within this distance (m) counts as reached.
+        importance: ``"distance"`` (nearer first) or ``"pixels"`` (taller on screen first).
+        min_reliability: below this ρ a clip's controls are pulled towards the nearest sample.
+    """
+
+    capacities: tuple[int, ...]
+    thresholds: tuple[float, ...]
+    hysteresis: float = 2.0
+    blend_max_level: int = 1
+    refresh: int = 0
+    reach: float = 2.0
+    importance: str = "distance"
+    min_reliability: float = 0.5
+
+    def check(self, levels: int) -> None:
+        """Raise :class:`JcrowdError` unless the settings fit a model with ``levels`` levels."""
+        if len(self.capacities) != levels or any(c < 1 for c in self.capacities):
+            raise JcrowdError(
+                f"lod.capacities: expected {levels} positive integers (one per model level), "
+                f"found {list(self.capacities)}"
+            )
+        if len(self.thresholds) != levels - 1:
+            raise JcrowdError(
+                f"lod.thresholds: expected {levels - 1} distances for a {levels}-level model, "
+                f"found {list(self.thresholds)}"
+            )
+        if self.importance not in ("distance", "pixels"):
+            raise JcrowdError(
+                f"lod.importance: expected 'distance' or 'pixels', found {self.importance!r}"
+            )
+
+
+def default_capacities(agents: int, levels: int) -> tuple[int, ...]:
+    """A budget from the agent count: level l holds ``N / 2^(L − l) + 64``, the last all."""
+    caps = [min(agents, agents // 2 ** (levels - lv) + 64) for lv in range(levels - 1)]
+    return (*caps, agents)
+
+
+class CrowdState(eqx.Module):
+    """Every agent's state; leading axis = agents (``N``), ``A`` = mixing-vector length."""
+
+    position: Float[Array, "N 2"]  # root (x, z), m
+    heading: Float[Array, " N"]  # rad; faces (sin, 0, cos)
+    tau: Float[Array, " N"]  # phase in aligned frames, [0, T − 1)
+    control: Float[Array, "N d"]  # current clip's controls
+    mix: Float[Array, "N A"]  # current clip's mixing vector [b(c); 1; ĉ]
+    duration: Float[Array, " N"]  # current clip's duration (model frames)
+    control_next: Float[Array, "N d"]
+    mix_next: Float[Array, "N A"]
+    duration_next: Float[Array, " N"]
+    has_next: Bool[Array, " N"]
+    origin: Float[Array, "N 3"]  # (x, z, heading) at the current cycle's start
+    level: Int[Array, " N"]  # last LOD level; L = culled
+    alive: Bool[Array, " N"]
+    height: Float[Array, " N"]  # m (style)
+    speed: Float[Array, " N"]  # m/s (style)
+    waypoints: Float[Array, "N K 2"]
+    num_waypoints: Int[Array, " N"]
+    loop: Bool[Array, " N"]
+    waypoint: Int[Array, " N"]  # index of the waypoint being walked to
+
+    @property
+    def num_agents(self) -> int:
+        return int(self.position.shape[0])
+
+
+class Frame(eqx.Module):
+    """What a renderer (or a recorder) needs from one step, all with static shapes.
+
+    ``slots[l]`` are agent ids (``N`` in unused slots), ``points[l]`` the world positions of
+    every joint and End Site of those agents ``(C_l, J + E, 3)``.
+    """
+
+    slots: tuple[Int[Array, " C"], ...]
+    valid: tuple[Bool[Array, " C"], ...]
+    points: tuple[Float[Array, "C P 3"], ...]
+    level: Int[Array, " N"]
+    overflow: Int[Array, ""]
+    deferred: Int[Array, ""]
+
+
+def init_state(
+    cm: CrowdModel, spawn: dict[str, Array], key: Array, min_reliability: float = 0.5
+) -> CrowdState:
+    """The first state: every agent on its first clip at a random phase (``key``).
+
+    ``spawn`` holds ``position (N, 2)``, ``heading``, ``height``, ``speed`` ``(N,)``,
+    ``waypoints (N, K, 2)``, ``num_waypoints (N,)``, ``loop (N,)``.
+    """
+    n = spawn["position"].shape[0]
+    heading = jnp.asarray(spawn["heading"], jnp.float32)
+    pos = jnp.asarray(spawn["position"], jnp.float32)
+    # A zero-length "previous cycle" ending where the agent stands: next_clip then plans the
+    # first cycle from the spawn pose.
+    origin = jnp.concatenate([pos, heading[:, None]], axis=1)
+    zero = jnp.zeros((n, cm.lo.shape[0]), jnp.float32)
+    waypoints = jnp.asarray(spawn["waypoints"], jnp.float32)
+    target = waypoints[:, 0]
+    height = jnp.asarray(spawn["height"], jnp.float32)
+    speed = jnp.asarray(spawn["speed"], jnp.float32)
+    c, a, dur = jax.vmap(lambda o, c0, t, s, h: next_clip(cm, o, c0, t, s, h, min_reliability))(
+        origin, zero, target, speed, height
+    )
+    tau = jax.random.uniform(key, (n,), jnp.float32, 0.0, float(cm.frames - 1) / 2)
+    return CrowdState(
+        position=pos,
+        heading=heading,
+        tau=tau,
+        control=c,
+        mix=a,
+        duration=dur,
+        control_next=c,
+        mix_next=a,
+        duration_next=dur,
+        has_next=jnp.zeros(n, bool),
+        origin=origin,
+        level=jnp.zeros(n, jnp.int32),
+        alive=jnp.ones(n, bool),
+        height=height,
+        speed=speed,
+        waypoints=waypoints,
+        num_waypoints=jnp.asarray(spawn["num_waypoints"], jnp.int32),
+        loop=jnp.asarray(spawn["loop"], bool),
+        waypoint=jnp.zeros(n, jnp.int32),
+    )
+
+
+def _smoothstep(x: Array) -> Array:
+    x = jnp.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def _agent_level(cm: CrowdModel, level: int, blend: bool, state: CrowdState, i: Array, dt: Array):
+    """Pose and root motion of agent ``i`` at ``level`` (one agent; batched by ``vmap``)."""
+    lv = cm.decoders.levels[level]
+    last = float(cm.frames - 1)
+    tau = state.tau[i]
+    g = decode_coeffs(lv, state.mix[i], tau)
+    if blend:
+        s = _smoothstep((tau - last / 2) / (last / 2)) * state.has_next[i]
+        g = g + s * (decode_coeffs(lv, state.mix_next[i], tau) - g)
+    y = pose_from_coeffs(lv, g)
+    h = state.height[i]
+    pts = level_points(lv, y, state.position[i], state.heading[i], h)
+    rates = root_rates(y)
+    dtau = dt * cm.decoders.fps / rates.delta_a
+    dpos = local_to_world(rates.velocity * h * dtau, state.heading[i])
+    return pts, dtau, rates.yaw_rate * dtau, dpos
+
+
+def _dead_reckoning(cm: CrowdModel, state: CrowdState, dt: Array) -> tuple[Array, Array, Array]:
+    """Root-only advance along the clip's arc at its mean rate (culled agents)."""
+    ix, iz, iyaw = cm.index[:3]
+    last = float(cm.frames - 1)
+    dtau = dt * cm.decoders.fps * last / jnp.maximum(state.duration, 1.0)
+    frac = dtau / last
+    turn = state.control[:, iyaw]
+    half = turn / 2
+    # Constant speed and turn rate over the cycle end at (dx, dz) with heading + turn when the
+    # local velocity is the chord rotated back by half the turn, lengthened by θ/2 / sin(θ/2).
+    gain = jnp.where(jnp.abs(half) > 1e-4, half / jnp.sin(jnp.where(half == 0, 1.0, half)), 1.0)
+    chord = jnp.stack([state.control[:, ix], state.control[:, iz]], axis=1) * gain[:, None]
+    local = local_to_world(chord, -half)
+    return dtau, turn * frac, local_to_world(local * frac[:, None], state.heading)
+
+
+def step(
+    cm: CrowdModel, config: StepConfig, state: CrowdState, view: CameraView, dt: Array
+) -> tuple[CrowdState, Frame]:
+    """Advance the crowd by ``dt`` seconds and return the frame at the step's start."""
+    nlev = len(cm.decoders.levels)
+    dt = jnp.asarray(dt, jnp.float32)
+    xz = state.position
+    centre = jnp.stack([xz[:, 0], 0.55 * state.height, xz[:, 1]], axis=1)
+    visible = state.alive & in_frustum(view, centre, radius=0.6 * 1.9)
+    dist = jnp.linalg.norm(centre - view.eye, axis=1)
+    previous = jnp.minimum(state.level, nlev - 1)
+    thresholds = jnp.asarray(config.thresholds, jnp.float32)
+    min_level = distance_levels(dist, previous, thresholds, config.hysteresis)
+    importance = (
+        -dist if config.importance == "distance" else screen_height_px(view, centre, state.height)
+    )
+    buckets = assign_buckets(min_level, importance, visible, config.capacities)
+
+    dtau, dyaw, dpos = _dead_reckoning(cm, state, dt)
+    points = []
+    for lv, (slots, ok) in enumerate(zip(buckets.slots, buckets.valid, strict=True)):
+        safe = jnp.where(ok, slots, 0)
+        blend = lv <= config.blend_max_level
+
+        def one(i, lv=lv, blend=blend):
+            return _agent_level(cm, lv, blend, state, i, dt)
+
+        pts, t_l, yaw_l, pos_l = jax.vmap(one)(safe)
+        points.append(pts)
+        dtau = dtau.at[slots].set(t_l, mode="drop")
+        dyaw = dyaw.at[slots].set(yaw_l, mode="drop")
+        dpos = dpos.at[slots].set(pos_l, mode="drop")
+
+    alive = state.alive
+    still = alive[:, None]
+    position = jnp.where(still, xz + dpos, xz)
+    heading = jnp.where(alive, state.heading + dyaw, state.heading)
+    tau = jnp.where(alive, state.tau + dtau, state.tau)
+    state = eqx.tree_at(lambda s: (s.position, s.heading, s.tau), state, (position, heading, tau))
+    state, deferred = _schedule(cm, config, state)
+    state = eqx.tree_at(lambda s: s.level, state, buckets.level)
+    frame = Frame(
+        buckets.slots, buckets.valid, tuple(points), buckets.level, buckets.overflow, deferred
+    )
+    return state, frame
+
+
+def _schedule(cm: CrowdModel, config: StepConfig, state: CrowdState) -> tuple[CrowdState, Array]:
+    """Waypoints, next-clip choice at mid-cycle (bounded per step) and clip hand-over."""
+    n = state.num_agents
+    last = float(cm.frames - 1)
+    rows = jnp.arange(n)
+    target = state.waypoints[rows, state.waypoint]
+    reached = state.alive & (jnp.linalg.norm(target - state.position, axis=1) < config.reach)
+    wp = state.waypoint + reached
+    done = wp >= state.num_waypoints
+    wp = jnp.where(done & state.loop, 0, jnp.minimum(wp, state.num_waypoints - 1))
+    alive = state.alive & ~(done & ~state.loop)
+
+    need = alive & ~state.has_next & (state.tau >= last / 2)
+    (idx,) = jnp.nonzero(need, size=min(config.refresh or n // 16 + 64, n), fill_value=n)
+    safe = jnp.where(idx < n, idx, 0)
+    tgt = state.waypoints[safe, wp[safe]]
+    c, a, dur = jax.vmap(
+        lambda o, c0, t, s, h: next_clip(cm, o, c0, t, s, h, config.min_reliability)
+    )(state.origin[safe], state.control[safe], tgt, state.speed[safe], state.height[safe])
+    control_next = state.control_next.at[idx].set(c, mode="drop")
+    mix_next = state.mix_next.at[idx].set(a, mode="drop")
+    duration_next = state.duration_next.at[idx].set(dur, mode="drop")
+    has_next = state.has_next.at[idx].set(True, mode="drop")
+    deferred = jnp.sum(need) - jnp.sum(idx < n)
+
+    wrap = state.tau >= last
+    take = wrap & has_next
+    sel = take[:, None]
+    new_origin = jnp.concatenate([state.position, state.heading[:, None]], axis=1)
+    return (
+        CrowdState(
+            position=state.position,
+            heading=state.heading,
+            tau=jnp.where(wrap, state.tau - last, state.tau),
+            control=jnp.where(sel, control_next, state.control),
+            mix=jnp.where(sel, mix_next, state.mix),
+            duration=jnp.where(take, duration_next, state.duration),
+            control_next=control_next,
+            mix_next=mix_next,
+            duration_next=duration_next,
+            has_next=has_next & ~take,
+            origin=jnp.where(wrap[:, None], new_origin, state.origin),
+            level=state.level,
+            alive=alive,
+            height=state.height,
+            speed=state.speed,
+            waypoints=state.waypoints,
+            num_waypoints=state.num_waypoints,
+            loop=state.loop,
+            waypoint=wp,
+        ),
+        deferred,
+    )

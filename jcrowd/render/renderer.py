@@ -1,0 +1,394 @@
+"""``CrowdRenderer``: one instanced draw per LOD level into an MSAA framebuffer, read back.
+
+Per level the renderer owns one capsule mesh (:mod:`jcrowd.render.meshes`), one instance
+buffer sized in ``__init__`` for ``capacity × bones`` instances and never reallocated, and one
+vertex array binding both. A frame is:
+
+1. per level, gather the valid agents' bones into a preallocated NumPy staging array of rows
+   ``(start xyz, end xyz, colour rgb)`` (one host copy of the joints; device arrays are fine),
+   and ``buffer.write`` it;
+2. clear, draw each level with ``instances = valid agents × bones`` (one draw call), draw the
+   ground, resolve the multisampled framebuffer into a plain one and read it back flipped so
+   row 0 is the top of the image;
+3. check the GL error flag.
+
+Invalid (padding) slots are dropped by the gather, so they draw nothing whatever they hold;
+points behind the camera are removed by ordinary clipping.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any
+
+import moderngl
+import numpy as np
+from jaxtyping import Bool, Float
+
+from jcrowd.errors import RenderError
+from jcrowd.render.camera import View, projection_matrix, view_matrix
+from jcrowd.render.context import check_gl, gl_renderer, make_context
+from jcrowd.render.meshes import (
+    CAPSULE_FRAGMENT,
+    CAPSULE_VERTEX,
+    GROUND_FRAGMENT,
+    GROUND_VERTEX,
+    capsule_detail,
+    capsule_mesh,
+    ground_mesh,
+)
+
+__all__ = ["CrowdRenderer", "LevelInstances", "LevelMesh"]
+
+_LIGHT_DIR = np.array([0.35, 0.85, 0.40]) / np.linalg.norm([0.35, 0.85, 0.40])  # sun, from above
+_AMBIENT = 0.40
+_GROUND = (0.74, 0.74, 0.70)
+_GRID_LINE = (0.52, 0.52, 0.50)
+_FLOATS_PER_BONE = 9  # start xyz, end xyz, colour rgb
+
+
+@dataclass(frozen=True)
+class LevelMesh:
+    """The skeleton topology one LOD level is drawn with.
+
+    Attributes:
+        parents: parent index of each joint of that level's skeleton, -1 for a root; parents
+            come before their children (``parents[j] < j``). Every joint with a parent is the
+            end of one bone (drawn as a capsule from the parent to it).
+    """
+
+    parents: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        p = tuple(int(x) for x in self.parents)
+        if len(p) == 0:
+            raise RenderError("LevelMesh: expected at least one joint, found none")
+        bad = [j for j, q in enumerate(p) if not -1 <= q < j]
+        if bad:
+            raise RenderError(
+                f"LevelMesh: expected parents[j] in [-1, j) (topological order), found "
+                f"parents[{bad[0]}] = {p[bad[0]]}"
+            )
+        object.__setattr__(self, "parents", p)
+
+    @property
+    def num_joints(self) -> int:
+        """Joints in this level's skeleton."""
+        return len(self.parents)
+
+    @property
+    def bones(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(parent_index, joint_index)`` int64 arrays, one entry per bone."""
+        joints = np.array([j for j, q in enumerate(self.parents) if q >= 0], np.int64)
+        return np.asarray(self.parents, np.int64)[joints], joints
+
+
+@dataclass(frozen=True)
+class LevelInstances:
+    """One LOD level's agents in a frame, in fixed-capacity slots.
+
+    Attributes:
+        joints: ``(C, J, 3)`` world positions (m, y up) of that level's ``J`` joints; NumPy or
+            device arrays (copied to the host once).
+        valid: ``(C,)`` bool, the slots to draw; padding slots are False and may hold anything.
+        colors: ``(C, 3)`` RGB in [0, 1] per slot (e.g. from ``LEVEL_COLORS``).
+    """
+
+    joints: Float[Any, "C J 3"]
+    valid: Bool[Any, " C"]
+    colors: Float[Any, "C 3"]
+
+
+class _Level:
+    """GL objects and the staging array of one level (internal)."""
+
+    def __init__(
+        self,
+        ctx: moderngl.Context,
+        prog: moderngl.Program,
+        mesh: LevelMesh,
+        capacity: int,
+        geometry: tuple[moderngl.Buffer, moderngl.Buffer],
+    ) -> None:
+        self.mesh = mesh
+        self.capacity = capacity
+        self.parent_idx, self.joint_idx = mesh.bones
+        self.num_bones = len(self.joint_idx)
+        self.staging = np.zeros((capacity, self.num_bones, _FLOATS_PER_BONE), np.float32)
+        vbo, ibo = geometry
+        self.instances = ctx.buffer(reserve=max(self.staging.nbytes, 4))
+        self.vao = ctx.vertex_array(
+            prog,
+            [
+                (vbo, "3f 1f", "in_offset", "in_end"),
+                (self.instances, "3f 3f 3f/i", "a_start", "a_end", "a_color"),
+            ],
+            index_buffer=ibo,
+            index_element_size=4,
+        )
+
+    def release(self) -> None:
+        self.vao.release()
+        self.instances.release()
+
+
+class CrowdRenderer:
+    """Headless renderer of crowds of stick-capsule characters, one instanced draw per level.
+
+    Args:
+        levels: per LOD level, the parent index of each joint of that level's skeleton.
+        width, height: image size in pixels.
+        capacity: per level, the most agents (slots) a frame may pass; the instance buffers
+            are allocated once with this size.
+        samples: MSAA samples (0 or 1 = no multisampling; at most ``ctx.max_samples``).
+        ctx: a moderngl context to draw with (left open by :meth:`release`); by default one
+            is made with :func:`make_context` and released with the renderer.
+        bone_radius: capsule radius (m), sized for a 1.7 m character.
+        ground_size: side of the square ground plane centred on the origin (m).
+        background: clear colour, RGB in [0, 1].
+        ground: draw the ground plane and its grid.
+    """
+
+    def __init__(
+        self,
+        levels: Sequence[Sequence[int]],
+        width: int = 1280,
+        height: int = 720,
+        *,
+        capacity: Sequence[int],
+        samples: int = 4,
+        ctx: moderngl.Context | None = None,
+        bone_radius: float = 0.05,
+        ground_size: float = 200.0,
+        background: tuple[float, float, float] = (0.85, 0.88, 0.92),
+        ground: bool = True,
+    ) -> None:
+        meshes = [LevelMesh(tuple(p)) for p in levels]
+        caps = [int(c) for c in capacity]
+        _check_args(meshes, caps, width, height, samples, bone_radius, ground_size, background)
+        self.width, self.height = int(width), int(height)
+        r, g, b = (float(c) for c in background)
+        self.background = (r, g, b)
+        self.bone_radius = float(bone_radius)
+        self.ground_size = float(ground_size)
+        self._draw_ground = bool(ground)
+        self._owns_ctx = ctx is None
+        self.ctx = make_context() if ctx is None else ctx
+        self._released = False
+        if samples > 1 and samples > self.ctx.max_samples:
+            self._release_ctx()
+            raise RenderError(
+                f"CrowdRenderer: {samples} MSAA samples asked, the driver allows at most "
+                f"{self.ctx.max_samples}"
+            )
+        self.samples = samples if samples > 1 else 0
+        ctx_ = self.ctx
+        self._objects: list[Any] = []
+        self._capsule = ctx_.program(vertex_shader=CAPSULE_VERTEX, fragment_shader=CAPSULE_FRAGMENT)
+        self._ground_prog = ctx_.program(
+            vertex_shader=GROUND_VERTEX, fragment_shader=GROUND_FRAGMENT
+        )
+        self._objects += [self._capsule, self._ground_prog]
+        geometries: dict[tuple[int, int], tuple[moderngl.Buffer, moderngl.Buffer]] = {}
+        self._levels: list[_Level] = []
+        for i, (mesh, cap) in enumerate(zip(meshes, caps, strict=True)):
+            detail = capsule_detail(i)
+            if detail not in geometries:
+                vertices, triangles = capsule_mesh(*detail)
+                vbo, ibo = ctx_.buffer(vertices.tobytes()), ctx_.buffer(triangles.tobytes())
+                self._objects += [vbo, ibo]
+                geometries[detail] = (vbo, ibo)
+            self._levels.append(_Level(ctx_, self._capsule, mesh, cap, geometries[detail]))
+        self._ground_vbo = ctx_.buffer(ground_mesh(self.ground_size).tobytes())
+        self._ground_vao = ctx_.vertex_array(
+            self._ground_prog, [(self._ground_vbo, "3f", "in_position")]
+        )
+        self._objects += [self._ground_vbo, self._ground_vao]
+        size = (self.width, self.height)
+        self._resolved = ctx_.simple_framebuffer(size, components=4)
+        self._objects.append(self._resolved)
+        if self.samples:
+            self._color_ms = ctx_.renderbuffer(size, components=4, samples=self.samples)
+            self._depth_ms = ctx_.depth_renderbuffer(size, samples=self.samples)
+            self._target = ctx_.framebuffer(self._color_ms, self._depth_ms)
+            self._objects += [self._target, self._color_ms, self._depth_ms]
+        else:
+            self._target = self._resolved
+        self._set_constant_uniforms()
+        check_gl(ctx_, "renderer setup")
+
+    @property
+    def renderer_name(self) -> str:
+        """The GL driver's ``GL_RENDERER`` string (e.g. ``llvmpipe (…)`` or a GPU's name)."""
+        return gl_renderer(self.ctx)
+
+    @property
+    def num_levels(self) -> int:
+        """Number of LOD levels this renderer was made for."""
+        return len(self._levels)
+
+    def render(self, view: View, levels: Sequence[LevelInstances]) -> np.ndarray:
+        """Draw one frame and return it as a ``(height, width, 3)`` uint8 RGB array, row 0 on top.
+
+        Args:
+            view: the camera.
+            levels: one :class:`LevelInstances` per level, in the constructor's order.
+
+        Raises:
+            RenderError: wrong number of levels, shapes that do not match the level's skeleton
+                or capacity, non-finite joints or colours in a valid slot, a released renderer,
+                or a GL error.
+        """
+        if self._released:
+            raise RenderError("CrowdRenderer.render: the renderer has been released")
+        if len(levels) != len(self._levels):
+            raise RenderError(
+                f"CrowdRenderer.render: expected {len(self._levels)} levels, found {len(levels)}"
+            )
+        counts = [
+            _stage(level, data, i)
+            for i, (level, data) in enumerate(zip(self._levels, levels, strict=True))
+        ]
+        view_proj = projection_matrix(view, self.width, self.height) @ view_matrix(view)
+        vp_bytes = view_proj.T.astype(np.float32).tobytes()  # GL wants column-major
+        ctx = self.ctx
+        self._target.use()
+        ctx.enable_only(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        ctx.front_face, ctx.cull_face = "ccw", "back"
+        self._target.clear(color=(*self.background, 1.0), depth=1.0)
+        _uniform(self._capsule, "u_view_proj").write(vp_bytes)
+        for level, n in zip(self._levels, counts, strict=True):
+            if n * level.num_bones == 0:
+                continue
+            level.instances.write(level.staging[:n])
+            level.vao.render(moderngl.TRIANGLES, instances=n * level.num_bones)
+        if self._draw_ground:
+            _uniform(self._ground_prog, "u_view_proj").write(vp_bytes)
+            self._ground_vao.render(moderngl.TRIANGLES)
+        if self.samples:
+            ctx.copy_framebuffer(self._resolved, self._target)
+        raw = self._resolved.read(components=3, alignment=1)
+        check_gl(ctx, "render")
+        image = np.frombuffer(raw, np.uint8).reshape(self.height, self.width, 3)
+        return np.ascontiguousarray(image[::-1])  # GL rows start at the bottom
+
+    def release(self) -> None:
+        """Free every GL object (and the context if the renderer made it). Idempotent."""
+        if self._released:
+            return
+        self._released = True
+        bound = self.ctx.fbo
+        if bound is not None and bound.glo in (self._target.glo, self._resolved.glo):
+            # moderngl re-binds the last used framebuffer after creating another one; if that
+            # is ours and deleted, a later renderer on a shared context gets
+            # GL_INVALID_OPERATION. Bind the default framebuffer (0) instead.
+            self.ctx.detect_framebuffer(0).use()
+        for level in self._levels:
+            level.release()
+        for obj in reversed(self._objects):
+            obj.release()
+        self._release_ctx()
+
+    def __enter__(self) -> CrowdRenderer:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.release()
+
+    def _release_ctx(self) -> None:
+        if self._owns_ctx:
+            self.ctx.release()
+
+    def _set_constant_uniforms(self) -> None:
+        _uniform(self._capsule, "u_radius").value = self.bone_radius
+        _uniform(self._capsule, "u_light_dir").value = tuple(float(x) for x in _LIGHT_DIR)
+        _uniform(self._capsule, "u_ambient").value = _AMBIENT
+        g = self._ground_prog
+        _uniform(g, "u_ground").value = _GROUND
+        _uniform(g, "u_line").value = _GRID_LINE
+        _uniform(g, "u_background").value = self.background
+        _uniform(g, "u_half_size").value = self.ground_size / 2.0
+
+
+def _uniform(prog: moderngl.Program, name: str) -> moderngl.Uniform:
+    """The uniform ``name`` of ``prog`` (a shader bug if it is missing or not a uniform)."""
+    member = prog.get(name, None)
+    if not isinstance(member, moderngl.Uniform):
+        raise RenderError(f"shader program has no uniform {name!r} (found {member!r})")
+    return member
+
+
+def _stage(level: _Level, data: LevelInstances, index: int) -> int:
+    """Check one level's input and gather its valid agents' bones into ``level.staging``.
+
+    Returns the number of valid agents staged.
+    """
+    where = f"CrowdRenderer.render: level {index}"
+    joints = np.asarray(data.joints)
+    valid = np.asarray(data.valid)
+    colors = np.asarray(data.colors)
+    c, j = joints.shape[0] if joints.ndim else 0, level.mesh.num_joints
+    if joints.shape != (c, j, 3):
+        raise RenderError(f"{where}: expected joints of shape (C, {j}, 3), found {joints.shape}")
+    if c > level.capacity:
+        raise RenderError(f"{where}: {c} slots passed, capacity is {level.capacity}")
+    if valid.shape != (c,) or valid.dtype != np.bool_:
+        raise RenderError(
+            f"{where}: expected valid of shape ({c},) bool, found {valid.shape} {valid.dtype}"
+        )
+    if colors.shape != (c, 3):
+        raise RenderError(f"{where}: expected colors of shape ({c}, 3), found {colors.shape}")
+    rows = np.flatnonzero(valid)
+    n = len(rows)
+    if n == 0 or level.num_bones == 0:
+        return n
+    # Only valid slots are checked: padding slots may hold anything (e.g. stale or NaN poses).
+    picked = joints[rows].astype(np.float32, copy=False)
+    picked_colors = colors[rows].astype(np.float32, copy=False)
+    if not np.all(np.isfinite(picked)):
+        bad = int(rows[np.flatnonzero(~np.isfinite(picked).all(axis=(1, 2)))[0]])
+        raise RenderError(f"{where}: non-finite joint positions in valid slot {bad}")
+    if not np.all(np.isfinite(picked_colors)):
+        raise RenderError(f"{where}: non-finite colours in a valid slot")
+    out = level.staging[:n]
+    out[:, :, 0:3] = picked[:, level.parent_idx]
+    out[:, :, 3:6] = picked[:, level.joint_idx]
+    out[:, :, 6:9] = picked_colors[:, None, :]
+    return n
+
+
+def _check_args(
+    meshes: list[LevelMesh],
+    capacity: list[int],
+    width: int,
+    height: int,
+    samples: int,
+    bone_radius: float,
+    ground_size: float,
+    background: tuple[float, float, float],
+) -> None:
+    """Raise :class:`RenderError` for constructor arguments that cannot work."""
+    checks = (
+        (len(meshes) >= 1, "at least one level", len(meshes)),
+        (len(capacity) == len(meshes), f"{len(meshes)} capacities (one per level)", capacity),
+        (all(c >= 0 for c in capacity), "non-negative capacities", capacity),
+        (int(width) >= 1 and int(height) >= 1, "a positive image size", f"{width}×{height}"),
+        (int(samples) >= 0, "samples ≥ 0", samples),
+        (bone_radius > 0, "a positive bone radius (m)", bone_radius),
+        (ground_size > 0, "a positive ground size (m)", ground_size),
+        (
+            len(background) == 3 and all(0.0 <= float(c) <= 1.0 for c in background),
+            "a background RGB in [0, 1]",
+            background,
+        ),
+    )
+    for ok, expected, found in checks:
+        if not ok:
+            raise RenderError(f"CrowdRenderer: expected {expected}, found {found}")

@@ -1,0 +1,650 @@
+"""Scenarios: a crowd described in TOML — ground, groups, camera, LOD settings, model, seed, time.
+
+The file format is documented key by key in ``examples/README.md``. :func:`load_scenario` reads
+the file (the only IO besides checking that a model file exists); :func:`parse_scenario` checks
+and builds a :class:`Scenario`; :func:`spawn` (from :mod:`jcrowd.scenario_spawn`) places agents.
+
+Conventions:
+
+- Units are metres, seconds and radians unless a name says otherwise (``fov_deg``).
+- The ground is the x–z plane, y up; a ground point is ``[x, z]``, a 3-D point ``[x, y, z]``.
+- Heading θ means facing ``(sin θ, 0, cos θ)``: 0 faces +z, positive yaw turns left (towards
+  +x, the walker's left when it faces +z). The camera's up is +y.
+- Every bad input is a :class:`~jcrowd.errors.ScenarioError` reading
+  ``file: key.path: expected …, found …`` (``file:line`` for TOML syntax). Key paths use the TOML
+  names and count from 0: ``groups[2]`` is the third ``[[groups]]`` table.
+
+The dataclasses check their own fields, types included, so a scenario built in code is as valid
+as a parsed one; their errors name the TOML key relative to the object (``count: expected …``).
+The parser only walks the tables (unknown and missing keys) and prefixes the file and the path.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import numbers
+import os
+import pathlib
+import re
+import tomllib
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, NoReturn, TypeVar
+
+import numpy as np
+from jaxtyping import Bool, Float
+
+from jcrowd.errors import ScenarioError, where
+from jcrowd.scenario_spawn import (
+    Spawn,
+    polygon_area,
+    polygon_contains,
+    polygon_problem,
+    sample_triangles,
+    spawn,
+    triangulate,
+)
+
+__all__ = [
+    "DEFAULT_THRESHOLDS_M",
+    "Camera",
+    "CameraKey",
+    "Group",
+    "LodSettings",
+    "Path",
+    "Region",
+    "Scenario",
+    "Spawn",
+    "camera_at",
+    "load_scenario",
+    "parse_scenario",
+    "spawn",
+]
+
+DEFAULT_THRESHOLDS_M = (30.0, 40.0, 50.0, 60.0, 80.0)
+"""Default LOD distances (6 levels), after paper 000 §5.1: full detail nearer than 30 m, then a
+coarser level (fewer joints, then smaller key levels) every 10 m, the last from 80 m."""
+
+SPEED_RANGE = (0.3, 3.0)  # m/s a walker may be given
+HEIGHT_RANGE = (1.0, 2.2)  # m, standing heights the model is scaled to
+
+
+class _Problem(ScenarioError):
+    """A failed check inside a dataclass; ``key`` is relative to the object being built."""
+
+    def __init__(self, key: str, detail: str) -> None:
+        super().__init__(f"{key}: {detail}" if key else detail)
+        self.key, self.detail = key, detail
+
+
+class _Raw(str):
+    """Text shown as is in a message (``_show`` quotes a plain string)."""
+
+
+def _show(value: Any) -> str:
+    """A value as TOML would spell it, shortened, for error messages."""
+    if isinstance(value, _Raw):
+        return str(value)
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, numbers.Real):
+        return repr(float(value)) if isinstance(value, float) else str(value)
+    if isinstance(value, Mapping):
+        return "a table {" + ", ".join(map(str, value)) + "}"
+    if isinstance(value, list | tuple):
+        items = [_show(v) for v in value[:6]] + (["…"] if len(value) > 6 else [])
+        return "[" + ", ".join(items) + "]"
+    return str(value)
+
+
+def _require(ok: Any, key: str, expected: str, found: Any) -> None:
+    if not ok:
+        raise _Problem(key, f"expected {expected}, found {_show(found)}")
+
+
+def _real(v: Any) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, numbers.Integral) and not isinstance(v, bool)
+
+
+def _reals(value: Any, key: str, expected: str, n: int | None = None) -> np.ndarray:
+    """A 1-D float64 array of finite numbers (``n`` of them when given); no bools or strings."""
+    if isinstance(value, np.ndarray):
+        ok = value.ndim == 1 and value.dtype.kind in "iuf" and bool(np.all(np.isfinite(value)))
+    else:
+        ok = isinstance(value, list | tuple) and all(_real(v) for v in value)
+    _require(ok and len(value) > 0 and (n is None or len(value) == n), key, expected, value)
+    return np.array(value, np.float64)
+
+
+def _points(value: Any, key: str) -> np.ndarray:
+    """A ``(P, 2)`` float64 array of ``[x, z]`` points, P ≥ 1."""
+    if isinstance(value, np.ndarray):
+        ok = value.ndim == 2 and value.shape[1] == 2 and value.dtype.kind in "iuf"
+        ok = ok and len(value) > 0 and bool(np.all(np.isfinite(value)))
+    else:
+        ok = isinstance(value, list | tuple) and len(value) > 0
+        ok = ok and all(isinstance(p, list | tuple) and len(p) == 2 for p in value)
+        ok = ok and all(_real(v) for p in value for v in p)
+    _require(ok, key, "a list of [x, z] points (m)", value)
+    return np.array(value, np.float64)
+
+
+def _range(value: Any, key: str, bounds: tuple[float, float], unit: str) -> tuple[float, float]:
+    expected = f"[lo, hi] {unit} with {bounds[0]} ≤ lo ≤ hi ≤ {bounds[1]}"
+    lo, hi = (value, value) if _real(value) else _reals(value, key, expected, 2)
+    _require(bounds[0] <= lo <= hi <= bounds[1], key, expected, value)
+    return float(lo), float(hi)
+
+
+# ----------------------------------------------------------------------------------- data model
+
+
+@dataclass(frozen=True, eq=False)
+class Region:
+    """An area of the ground: a rectangle, a circle or a simple polygon (x–z, metres).
+
+    ``kind`` is ``"rect"`` (axis-aligned: ``center`` and ``size = [width along x, depth along
+    z]``), ``"circle"`` (``center``, ``radius``) or ``"polygon"`` (``points``: ≥ 3, no crossing
+    or touching edges, positive area, either orientation, not closed by repeating the first
+    point). Fields a kind does not use keep their defaults. ``sample`` is uniform over the area.
+    """
+
+    kind: str
+    center: Float[np.ndarray, " 2"] = field(default_factory=lambda: np.zeros(2))
+    size: Float[np.ndarray, " 2"] = field(default_factory=lambda: np.zeros(2))
+    radius: float = 0.0
+    points: Float[np.ndarray, "P 2"] = field(default_factory=lambda: np.zeros((0, 2)))
+    _triangles: np.ndarray = field(init=False, repr=False, default_factory=lambda: np.zeros(0))
+
+    def __post_init__(self) -> None:
+        put = object.__setattr__
+        kinds = '"rect", "circle" or "polygon"'
+        _require(self.kind in ("rect", "circle", "polygon"), "shape", kinds, self.kind)
+        if self.kind == "polygon":
+            points = _points(self.points, "points")
+            problem = polygon_problem(points)
+            if problem is not None:
+                raise _Problem("points", problem)
+            put(self, "points", points)
+            put(self, "_triangles", triangulate(points))
+            return
+        put(self, "center", _reals(self.center, "center", "[x, z] (m)", 2))
+        if self.kind == "rect":
+            size = _reals(self.size, "size", "[width, depth] (m)", 2)
+            _require(np.all(size > 0), "size", "[width, depth] both > 0 (m)", self.size)
+            put(self, "size", size)
+        else:
+            _require(
+                _real(self.radius) and self.radius > 0, "radius", "a radius > 0 (m)", self.radius
+            )
+            put(self, "radius", float(self.radius))
+
+    @classmethod
+    def rect(cls, center: Sequence[float], size: Sequence[float]) -> Region:
+        return cls("rect", center=np.asarray(center, np.float64), size=np.asarray(size, np.float64))
+
+    @classmethod
+    def circle(cls, center: Sequence[float], radius: float) -> Region:
+        return cls("circle", center=np.asarray(center, np.float64), radius=radius)
+
+    @classmethod
+    def polygon(cls, points: Sequence[Sequence[float]]) -> Region:
+        return cls("polygon", points=np.asarray(points, np.float64))
+
+    @property
+    def area(self) -> float:
+        """Area in m²."""
+        if self.kind == "rect":
+            return float(self.size[0] * self.size[1])
+        if self.kind == "circle":
+            return math.pi * self.radius**2
+        return abs(polygon_area(self.points))
+
+    def bounds(self) -> tuple[Float[np.ndarray, " 2"], Float[np.ndarray, " 2"]]:
+        """Axis-aligned bounding box ``(lo, hi)``, each ``[x, z]``."""
+        if self.kind == "rect":
+            return self.center - self.size / 2, self.center + self.size / 2
+        if self.kind == "circle":
+            return self.center - self.radius, self.center + self.radius
+        return self.points.min(axis=0), self.points.max(axis=0)
+
+    def sample(self, rng: np.random.Generator, n: int) -> Float[np.ndarray, "n 2"]:
+        """``n`` points uniform over the region, ``(n, 2)`` float64."""
+        if self.kind == "rect":
+            return self.center + (rng.random((n, 2)) - 0.5) * self.size
+        if self.kind == "circle":
+            r = self.radius * np.sqrt(rng.random(n))  # √u: uniform per unit area, not per radius
+            angle = rng.uniform(0.0, 2.0 * math.pi, n)
+            return self.center + r[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+        return sample_triangles(self._triangles, rng, n)
+
+    def contains(self, points: Float[np.ndarray, "M 2"]) -> Bool[np.ndarray, " M"]:
+        """Which of ``points`` lie in the region (boundary included for rects and circles)."""
+        p = np.asarray(points, np.float64).reshape(-1, 2)
+        if self.kind == "rect":
+            return np.all(np.abs(p - self.center) <= self.size / 2, axis=1)
+        if self.kind == "circle":
+            return np.sum((p - self.center) ** 2, axis=1) <= self.radius**2
+        return polygon_contains(self.points, p)
+
+
+@dataclass(frozen=True, eq=False)
+class Path:
+    """Waypoints ``(K, 2)`` walked in order from the agent's spawn point; consecutive waypoints
+    differ. ``loop``: after the last, head to waypoint 0 again (needs K ≥ 2); otherwise stop and
+    idle at the last one."""
+
+    waypoints: Float[np.ndarray, "K 2"]
+    loop: bool = False
+
+    def __post_init__(self) -> None:
+        w = _points(self.waypoints, "waypoints")
+        _require(isinstance(self.loop, bool), "loop", "true or false", self.loop)
+        _require(not self.loop or len(w) >= 2, "loop", "false for a single waypoint", self.loop)
+        same = np.all(w[1:] == w[:-1], axis=1)
+        if same.any():
+            k = int(np.argmax(same)) + 1
+            _require(False, f"waypoints[{k}]", f"a point other than waypoints[{k - 1}]", w[k])
+        if self.loop and np.all(w[0] == w[-1]):
+            expected = "a point other than waypoints[0] (a looped path returns there by itself)"
+            _require(False, f"waypoints[{len(w) - 1}]", expected, w[-1])
+        object.__setattr__(self, "waypoints", w)
+
+
+@dataclass(frozen=True, eq=False)
+class Group:
+    """Agents that spawn together and share a path or a goal.
+
+    Exactly one of ``path`` and ``goal``: a path is walked waypoint by waypoint; a goal means
+    walk straight to one random point in the goal region, then stop and idle there.
+    ``speed`` (m/s, within 0.3–3.0) and ``height`` (standing height in m, within 1.0–2.2) are
+    ``(lo, hi)`` ranges each agent draws uniformly from (a single number means lo = hi).
+    ``color`` RGB in [0, 1]; None takes the palette colour of the group's index.
+    """
+
+    name: str
+    count: int
+    spawn: Region
+    path: Path | None = None
+    goal: Region | None = None
+    speed: tuple[float, float] = (1.1, 1.5)
+    height: tuple[float, float] = (1.55, 1.9)
+    color: tuple[float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        put = object.__setattr__
+        _require(isinstance(self.name, str) and self.name, "name", "a non-empty string", self.name)
+        ok = _is_int(self.count) and self.count > 0
+        _require(ok, "count", "a positive integer", self.count)
+        put(self, "count", int(self.count))
+        if (self.path is None) == (self.goal is None):
+            found = "neither" if self.path is None else "both"
+            raise _Problem("", f"expected exactly one of `path` and `goal`, found {found}")
+        put(self, "speed", _range(self.speed, "speed", SPEED_RANGE, "m/s"))
+        put(self, "height", _range(self.height, "height", HEIGHT_RANGE, "m"))
+        if self.color is not None:
+            rgb = _reals(self.color, "color", "[r, g, b] in [0, 1]", 3)
+            _require(np.all((rgb >= 0) & (rgb <= 1)), "color", "[r, g, b] in [0, 1]", self.color)
+            put(self, "color", (float(rgb[0]), float(rgb[1]), float(rgb[2])))
+
+
+@dataclass(frozen=True, eq=False)
+class CameraKey:
+    """The camera at ``time`` (s): ``eye`` and ``target`` ``[x, y, z]`` (m); the view must not be
+    vertical, since the camera's up is +y."""
+
+    time: float
+    eye: Float[np.ndarray, " 3"]
+    target: Float[np.ndarray, " 3"]
+
+    def __post_init__(self) -> None:
+        _require(_real(self.time), "time", "a time in seconds", self.time)
+        object.__setattr__(self, "time", float(self.time))
+        eye = _reals(self.eye, "eye", "[x, y, z] (m)", 3)
+        target = _reals(self.target, "target", "[x, y, z] (m)", 3)
+        view = target - eye
+        level = math.hypot(view[0], view[2]) > 1e-6 * float(np.linalg.norm(view))
+        _require(level, "target", f"a point off the vertical through eye {_show(eye)}", target)
+        object.__setattr__(self, "eye", eye)
+        object.__setattr__(self, "target", target)
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A pinhole camera, fixed (one key) or moving (eye and target interpolated between keys).
+
+    ``fov_deg`` is the vertical field of view (1–170°); ``width`` × ``height`` the image in pixels
+    (positive, even); ``near`` and ``far`` the clip distances (0 < near < far, metres). Key times
+    strictly increase; before the first key and after the last the camera holds still.
+    """
+
+    keys: tuple[CameraKey, ...]
+    fov_deg: float = 60.0
+    width: int = 1280
+    height: int = 720
+    near: float = 0.1
+    far: float = 1000.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "keys", tuple(self.keys))
+        _require(self.keys, "keys", "at least one camera key", _Raw("none"))
+        for i in range(1, len(self.keys)):
+            t0, t1 = self.keys[i - 1].time, self.keys[i].time
+            _require(t1 > t0, f"keys[{i}].time", f"a time after keys[{i - 1}].time = {t0!r}", t1)
+        fov = self.fov_deg
+        _require(_real(fov) and 1 <= fov <= 170, "fov", "degrees in [1, 170]", fov)
+        for key in ("width", "height"):
+            v = getattr(self, key)
+            ok = _is_int(v) and v > 0 and v % 2 == 0
+            _require(ok, key, "a positive even number of pixels", v)
+        _require(_real(self.near) and self.near > 0, "near", "a distance > 0 (m)", self.near)
+        ok = _real(self.far) and self.far > self.near
+        _require(ok, "far", f"a distance > near = {self.near!r} (m)", self.far)
+
+
+@dataclass(frozen=True, eq=False)
+class LodSettings:
+    """Level-of-detail settings for the crowd step (issue 7; paper 000 §5.1).
+
+    ``thresholds_m``: increasing distances (m); an agent farther than ``thresholds_m[i]`` is at
+    level i + 1 or coarser, so there are ``len(thresholds_m) + 1`` levels. With
+    ``screen == "pixels"`` importance is an agent's projected height in pixels and a threshold d
+    stands for the pixel height of an agent at distance d (the crowd code converts).
+    ``hysteresis_m``: the margin an agent must cross beyond a threshold before it changes level
+    (≥ 0, less than half the gap between thresholds). ``capacities``: per-level agent budget, the
+    coarsest holding every agent; None lets the crowd code derive them from the agent count.
+    Levels ``≤ blend_max_level`` blend clips (−1: none does).
+    """
+
+    thresholds_m: tuple[float, ...] = DEFAULT_THRESHOLDS_M
+    hysteresis_m: float = 2.0
+    capacities: tuple[int, ...] | None = None
+    blend_max_level: int = 1
+    screen: str = "distance"
+
+    @property
+    def num_levels(self) -> int:
+        return len(self.thresholds_m) + 1
+
+    def __post_init__(self) -> None:
+        put = object.__setattr__
+        expected = "increasing distances > 0 (m)"
+        t = _reals(self.thresholds_m, "thresholds", expected)
+        _require(t[0] > 0 and np.all(np.diff(t) > 0), "thresholds", expected, self.thresholds_m)
+        put(self, "thresholds_m", tuple(float(v) for v in t))
+        half_gap = float(np.min(np.diff(t, prepend=0.0))) / 2
+        h = self.hysteresis_m
+        expected = f"metres in [0, {half_gap:g}) (half the smallest gap)"
+        _require(_real(h) and 0 <= h < half_gap, "hysteresis", expected, h)
+        put(self, "hysteresis_m", float(h))
+        if self.capacities is not None:
+            c = self.capacities
+            ok = isinstance(c, list | tuple) and len(c) == self.num_levels
+            ok = ok and all(_is_int(v) and v > 0 for v in c)
+            _require(ok, "capacities", f"{self.num_levels} positive integers (one per level)", c)
+            put(self, "capacities", tuple(int(v) for v in c))
+        b = self.blend_max_level
+        ok = _is_int(b) and -1 <= b < self.num_levels
+        _require(ok, "blend_max_level", f"an integer in [-1, {self.num_levels - 1}]", b)
+        ok = self.screen in ("distance", "pixels")
+        _require(ok, "importance", '"distance" or "pixels"', self.screen)
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Scenario:
+    """A whole scenario. ``model``: absolute path of a model file, or None for the shipped model.
+    ``ground`` is a rect holding every spawn region, goal region and waypoint; ``seed`` ≥ 0
+    drives :func:`spawn`; ``duration_s`` and ``fps`` are positive."""
+
+    source: str = "<code>"
+    model: str | None = None
+    seed: int = 0
+    duration_s: float
+    fps: float = 30.0
+    ground: Region
+    groups: tuple[Group, ...]
+    camera: Camera
+    lod: LodSettings = field(default_factory=LodSettings)
+
+    @property
+    def num_agents(self) -> int:
+        return sum(g.count for g in self.groups)
+
+    def __post_init__(self) -> None:
+        _require(_is_int(self.seed) and self.seed >= 0, "seed", "an integer ≥ 0", self.seed)
+        for key, v in (("duration", self.duration_s), ("fps", self.fps)):
+            _require(_real(v) and v > 0, key, "a positive number", v)
+        _require(self.ground.kind == "rect", "ground.shape", '"rect"', self.ground.kind)
+        object.__setattr__(self, "groups", tuple(self.groups))
+        _require(self.groups, "groups", "at least one [[groups]] table", _Raw("none"))
+        lo, hi = self.ground.bounds()
+        inside = f"inside the ground (x in [{lo[0]:g}, {hi[0]:g}], z in [{lo[1]:g}, {hi[1]:g}])"
+        names: dict[str, int] = {}
+        for i, g in enumerate(self.groups):
+            used = names.setdefault(g.name, i)
+            _require(used == i, f"groups[{i}].name", f"a name not used by groups[{used}]", g.name)
+            for key, region in (("spawn", g.spawn), ("goal", g.goal)):
+                if region is not None:
+                    a, b = region.bounds()
+                    found = f"one spanning x in [{a[0]:g}, {b[0]:g}], z in [{a[1]:g}, {b[1]:g}]"
+                    ok = np.all(a >= lo) and np.all(b <= hi)
+                    _require(ok, f"groups[{i}].{key}", f"a region {inside}", _Raw(found))
+            if g.path is not None:
+                out = ~self.ground.contains(g.path.waypoints)
+                k = int(np.argmax(out))
+                key = f"groups[{i}].path.waypoints[{k}]"
+                _require(not out.any(), key, f"a point {inside}", g.path.waypoints[k])
+        caps = self.lod.capacities
+        if caps is not None:
+            expected = f"a last (coarsest) level holding every agent ({self.num_agents})"
+            _require(caps[-1] >= self.num_agents, "lod.capacities", expected, caps[-1])
+
+
+def camera_at(camera: Camera, t: float) -> tuple[Float[np.ndarray, " 3"], Float[np.ndarray, " 3"]]:
+    """``(eye, target)`` at time ``t`` (s): linear between the keys around it, held outside."""
+    times = np.array([k.time for k in camera.keys])
+    if t <= times[0]:
+        return camera.keys[0].eye.copy(), camera.keys[0].target.copy()
+    if t >= times[-1]:
+        return camera.keys[-1].eye.copy(), camera.keys[-1].target.copy()
+    i = int(np.searchsorted(times, t, side="right")) - 1
+    a, b = camera.keys[i], camera.keys[i + 1]
+    s = (t - a.time) / (b.time - a.time)
+    return a.eye + s * (b.eye - a.eye), a.target + s * (b.target - a.target)
+
+
+# ------------------------------------------------------------------------------------- parsing
+
+_T = TypeVar("_T")
+_TOP = ("model", "seed", "duration", "fps", "ground", "camera", "lod", "groups")
+_GROUP = ("name", "count", "spawn", "path", "goal", "speed", "height", "color")
+_CAMERA = ("eye", "target", "keys", "fov", "width", "height", "near", "far")
+_CAMERA_KEY = ("time", "eye", "target")
+_SHAPES = {"rect": ("center", "size"), "circle": ("center", "radius"), "polygon": ("points",)}
+_LOD = {  # TOML key → LodSettings field
+    "thresholds": "thresholds_m",
+    "hysteresis": "hysteresis_m",
+    "capacities": "capacities",
+    "blend_max_level": "blend_max_level",
+    "importance": "screen",
+}
+
+
+class _Reader:
+    """Walks the TOML document's tables; every message starts with the file and a key path."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, path: str, detail: str) -> NoReturn:
+        raise ScenarioError(f"{self.source}: {path}: {detail}")
+
+    def build(self, at: str, make: Callable[..., _T], /, *args: Any, **kwargs: Any) -> _T:
+        """``make(*args, **kwargs)``, its problems reported under the key path ``at``."""
+        try:
+            return make(*args, **kwargs)
+        except _Problem as p:
+            self.fail(_join(at, p.key), p.detail)
+
+    def table(
+        self, value: Any, path: str, allowed: Sequence[str], required: Sequence[str] = ()
+    ) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            self.fail(path, f"expected a table, found {_show(value)}")
+        unknown = sorted(set(value) - set(allowed))
+        if unknown:
+            self.fail(_join(path, unknown[0]), f"unknown key; allowed keys: {', '.join(allowed)}")
+        for key in required:
+            if key not in value:
+                self.fail(_join(path, key), "expected a value, found nothing (required key)")
+        return value
+
+    def region(self, value: Any, path: str, ground: bool = False) -> Region:
+        t = self.table(value, path, ("shape", "center", "size", "radius", "points"))
+        shape = t.get("shape", "rect" if ground else None)
+        kinds = ("rect",) if ground else tuple(_SHAPES)
+        if shape not in kinds:
+            found = "nothing" if shape is None else _show(shape)
+            self.fail(
+                _join(path, "shape"), f"expected {' or '.join(map(_show, kinds))}, found {found}"
+            )
+        keys = _SHAPES[shape]
+        self.table(t, path, ("shape", *keys), keys)
+        return self.build(path, Region, shape, **{k: t[k] for k in keys})
+
+    def group(self, value: Any, path: str) -> Group:
+        t = self.table(value, path, _GROUP, ("count", "spawn"))
+        kw: dict[str, Any] = {
+            k: t[k] for k in ("name", "count", "speed", "height", "color") if k in t
+        }
+        kw.setdefault("name", path)
+        kw["spawn"] = self.region(t["spawn"], f"{path}.spawn")
+        if "path" in t:
+            p = self.table(t["path"], f"{path}.path", ("waypoints", "loop"), ("waypoints",))
+            kw["path"] = self.build(f"{path}.path", Path, p["waypoints"], p.get("loop", False))
+        if "goal" in t:
+            kw["goal"] = self.region(t["goal"], f"{path}.goal")
+        return self.build(path, Group, **kw)
+
+    def camera(self, value: Any) -> Camera:
+        t = self.table(value, "camera", _CAMERA)
+        if "keys" in t and ("eye" in t or "target" in t):
+            self.fail("camera", "expected eye and target (fixed) or [[camera.keys]], found both")
+        if "keys" in t:
+            keys = t["keys"]
+            if not isinstance(keys, list) or not keys:
+                self.fail("camera.keys", f"expected [[camera.keys]] tables, found {_show(keys)}")
+            made = []
+            for i, k in enumerate(keys):
+                path = f"camera.keys[{i}]"
+                k = self.table(k, path, _CAMERA_KEY, _CAMERA_KEY)
+                made.append(self.build(path, CameraKey, k["time"], k["eye"], k["target"]))
+        else:
+            self.table(t, "camera", _CAMERA, ("eye", "target"))
+            made = [self.build("camera", CameraKey, 0.0, t["eye"], t["target"])]
+        names = {
+            "fov": "fov_deg",
+            "width": "width",
+            "height": "height",
+            "near": "near",
+            "far": "far",
+        }
+        kw = {name: t[key] for key, name in names.items() if key in t}
+        return self.build("camera", Camera, tuple(made), **kw)
+
+    def model(self, value: Any, base_dir: pathlib.Path) -> str | None:
+        if not isinstance(value, str) or not value:
+            self.fail("model", f'expected "default" or a model file path, found {_show(value)}')
+        if value == "default":
+            return None
+        path = pathlib.Path(value).expanduser()
+        path = (path if path.is_absolute() else base_dir / path).resolve()
+        if not path.is_file():
+            self.fail("model", f"expected an existing model file, found {_show(value)} (no {path})")
+        return str(path)
+
+
+def _join(path: str, key: str) -> str:
+    if not path or not key:
+        return path or key
+    return path + key if key.startswith("[") else f"{path}.{key}"
+
+
+def parse_scenario(
+    text: str, source: str, base_dir: str | os.PathLike[str] | None = None
+) -> Scenario:
+    """Check and build a scenario from TOML ``text``.
+
+    Args:
+        text: the TOML document (layout in ``examples/README.md``).
+        source: how messages name the file, e.g. ``"plaza.toml"``; kept as ``Scenario.source``.
+        base_dir: folder a relative ``model`` path is resolved against (default: the current
+            folder). The model file must exist.
+
+    Raises:
+        ScenarioError: ``source:line: invalid TOML …`` for syntax, else
+            ``source: key.path: expected …, found …``.
+    """
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        message = str(e)
+        at = re.search(r"\s*\(at line (\d+), column (\d+)\)$", message)
+        if at is not None:
+            line, detail = int(at.group(1)), f"{message[: at.start()]} (column {at.group(2)})"
+        else:  # "(at end of document)"
+            line, detail = text.count("\n") + 1, message
+        raise ScenarioError(f"{where(source, line)}: invalid TOML: {detail}") from None
+    r = _Reader(source)
+    r.table(doc, "", _TOP, ("duration", "ground", "camera", "groups"))
+    groups = doc["groups"]
+    if not isinstance(groups, list) or not groups:
+        r.fail("groups", f"expected at least one [[groups]] table, found {_show(groups)}")
+    lod = r.table(doc.get("lod", {}), "lod", tuple(_LOD))
+    base = pathlib.Path(base_dir) if base_dir is not None else pathlib.Path.cwd()
+    return r.build(
+        "",
+        Scenario,
+        source=source,
+        model=r.model(doc.get("model", "default"), base),
+        seed=doc.get("seed", 0),
+        duration_s=doc["duration"],
+        fps=doc.get("fps", 30.0),
+        ground=r.region(doc["ground"], "ground", ground=True),
+        groups=tuple(r.group(g, f"groups[{i}]") for i, g in enumerate(groups)),
+        camera=r.camera(doc["camera"]),
+        lod=r.build("lod", LodSettings, **{_LOD[k]: v for k, v in lod.items()}),
+    )
+
+
+def load_scenario(path: str | os.PathLike[str]) -> Scenario:
+    """Read and parse a scenario file; a relative ``model`` path is taken from the file's folder.
+
+    The file is named in messages as ``path`` was given.
+    """
+    source = os.fspath(path)
+    file = pathlib.Path(source)
+    try:
+        raw = file.read_bytes()
+    except FileNotFoundError:
+        raise ScenarioError(f"{source}: expected a scenario file, found no such file") from None
+    except IsADirectoryError:
+        raise ScenarioError(f"{source}: expected a scenario file, found a folder") from None
+    except OSError as e:
+        raise ScenarioError(f"{source}: cannot be read ({e.strerror})") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = raw[: e.start].count(b"\n") + 1
+        found = f"byte {raw[e.start]:#04x}"
+        raise ScenarioError(f"{where(source, line)}: expected UTF-8 text, found {found}") from None
+    return parse_scenario(text, source, base_dir=file.resolve().parent)

@@ -1,0 +1,337 @@
+"""Where a scenario's agents start: polygon geometry for regions, and :func:`spawn`.
+
+Conventions (shared with :mod:`jcrowd.scenario`): the ground is the x–z plane, y up; a point on
+it is ``[x, z]`` in metres. Heading θ (radians, in (−π, π]) means facing ``(sin θ, 0, cos θ)``:
+θ = 0 faces +z and a positive yaw turns the walker to its left, towards +x (facing +z with y up,
++x is on the left, as in :mod:`jcrowd.gait`). The left of heading θ is ``(cos θ, −sin θ)`` in
+x–z. A positive lateral offset moves a path to its walker's left.
+
+Polygons are simple (no crossing or touching edges) with positive area; either orientation is
+accepted. They are sampled through an ear-clipping triangulation, each triangle chosen with
+probability proportional to its area, so samples are uniform over the polygon.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, cast
+
+import numpy as np
+from jaxtyping import Bool, Float, Int
+
+if TYPE_CHECKING:
+    from jcrowd.scenario import Region, Scenario
+
+__all__ = [
+    "LATERAL_JITTER_M",
+    "MIN_POLYGON_AREA_M2",
+    "Spawn",
+    "polygon_area",
+    "polygon_contains",
+    "polygon_problem",
+    "sample_triangles",
+    "spawn",
+    "triangulate",
+]
+
+MIN_POLYGON_AREA_M2 = 1e-6
+"""Polygons of this area or less are degenerate (collinear points)."""
+
+LATERAL_JITTER_M = 1.0
+"""Largest lateral offset of an agent's copy of its group's path (metres)."""
+
+# A mitred offset vertex moves by |offset| / cos(turn / 2); beyond a 120° turn that factor (2)
+# is capped so a sharp corner does not throw the vertex far away.
+_MAX_MITER = 2.0
+
+# Group colours when a group gives none: distinct hues, cycled by group index.
+_PALETTE = np.array(
+    [
+        [0.90, 0.30, 0.20],
+        [0.20, 0.50, 0.90],
+        [0.95, 0.75, 0.20],
+        [0.30, 0.70, 0.40],
+        [0.60, 0.40, 0.80],
+        [0.95, 0.55, 0.75],
+        [0.40, 0.80, 0.85],
+        [0.55, 0.45, 0.35],
+    ],
+    np.float32,
+)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def polygon_area(points: Float[np.ndarray, "P 2"]) -> float:
+    """Signed area (shoelace, m²); positive when the points turn from +x towards +z."""
+    nxt = np.roll(points, -1, axis=0)
+    return 0.5 * float(np.sum(_cross(points, nxt)))
+
+
+def _crossing_edges(points: np.ndarray) -> tuple[int, int] | None:
+    """First pair of edges that cross or touch (edge k joins points[k] and points[k+1])."""
+    n = len(points)
+    a, b = points, np.roll(points, -1, axis=0)
+    # Two edges that meet at their shared vertex must not fold back over each other.
+    fold = (_cross(b - a, np.roll(b - a, -1, axis=0)) == 0) & (
+        np.sum((a - b) * (np.roll(b, -1, axis=0) - b), axis=1) > 0
+    )
+    if fold.any():
+        k = int(np.argmax(fold))
+        return k, (k + 1) % n
+    A, B, C, D = a[:, None], b[:, None], a[None], b[None]
+    d1, d2 = _cross(D - C, A - C), _cross(D - C, B - C)
+    d3, d4 = _cross(B - A, C - A), _cross(B - A, D - A)
+
+    def on(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
+        return np.all((np.minimum(p, q) <= r) & (r <= np.maximum(p, q)), axis=-1)
+
+    hit = ((d1 * d2 < 0) & (d3 * d4 < 0)) | (
+        ((d1 == 0) & on(C, D, A))
+        | ((d2 == 0) & on(C, D, B))
+        | ((d3 == 0) & on(A, B, C))
+        | ((d4 == 0) & on(A, B, D))
+    )
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    hit &= (j > i + 1) & ~((i == 0) & (j == n - 1))
+    if not hit.any():
+        return None
+    first = np.argwhere(hit)[0]
+    return int(first[0]), int(first[1])
+
+
+def polygon_problem(points: Float[np.ndarray, "P 2"]) -> str | None:
+    """Why ``points`` is not a simple polygon of positive area ("expected …, found …"), or None."""
+    n = len(points)
+    if n < 3:
+        return f"expected at least 3 points [x, z], found {n}"
+    same = np.all(points == np.roll(points, -1, axis=0), axis=1)
+    if same[-1]:
+        return (
+            "expected distinct points, found the last point repeating points[0] "
+            "(a polygon closes by itself)"
+        )
+    if same.any():
+        k = int(np.argmax(same))
+        return f"expected distinct consecutive points, found points[{k + 1}] repeating points[{k}]"
+    centred = points - points.mean(axis=0)
+    spread = np.linalg.svd(centred, compute_uv=False)
+    if spread[1] <= 1e-12 * spread[0]:
+        return "expected points spanning an area, found them all on one line (collinear)"
+    crossing = _crossing_edges(points)
+    if crossing is not None:
+        i, j = crossing
+        return (
+            f"expected a simple polygon, found edges {i} and {j} crossing or touching "
+            f"(edge k joins points[k] and points[k+1])"
+        )
+    area = abs(polygon_area(points))
+    if area <= MIN_POLYGON_AREA_M2:
+        return f"expected a polygon of area > {MIN_POLYGON_AREA_M2:g} m², found {area:.3g} m²"
+    return None
+
+
+def _in_triangle(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Points ``p`` inside or on the positively oriented triangle ``abc``."""
+    return (_cross(b - a, p - a) >= 0) & (_cross(c - b, p - b) >= 0) & (_cross(a - c, p - c) >= 0)
+
+
+def triangulate(points: Float[np.ndarray, "P 2"]) -> Float[np.ndarray, "T 3 2"]:
+    """Ear-clipping triangulation of a simple polygon (positively oriented triangles).
+
+    A vertex where the boundary runs straight on is dropped without a triangle, so T ≤ P − 2.
+    """
+    pts = np.asarray(points, np.float64)
+    if polygon_area(pts) < 0:
+        pts = pts[::-1]
+    idx = list(range(len(pts)))
+    triangles = []
+    while len(idx) > 3:
+        ring = pts[idx]
+        prev, nxt = np.roll(ring, 1, axis=0), np.roll(ring, -1, axis=0)
+        turn = _cross(ring - prev, nxt - ring)
+        m, ear = len(idx), -1
+        for k in range(m):
+            if turn[k] == 0:
+                ear = k
+                break
+            others = np.delete(ring, [(k - 1) % m, k, (k + 1) % m], axis=0)
+            if turn[k] > 0 and not _in_triangle(others, prev[k], ring[k], nxt[k]).any():
+                ear = k
+                break
+        if ear < 0:  # only round-off can leave a simple polygon without an ear
+            ear = int(np.argmax(turn))
+        if turn[ear] != 0:
+            triangles.append(np.stack([prev[ear], ring[ear], nxt[ear]]))
+        del idx[ear]
+    triangles.append(pts[idx])
+    return np.stack(triangles)
+
+
+def sample_triangles(
+    triangles: Float[np.ndarray, "T 3 2"], rng: np.random.Generator, n: int
+) -> Float[np.ndarray, "n 2"]:
+    """``n`` points uniform over the union of ``triangles`` (which must not overlap)."""
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    area = 0.5 * np.abs(_cross(b - a, c - a))
+    tri = rng.choice(len(triangles), size=n, p=area / area.sum())
+    u = rng.random((n, 2))
+    flip = u.sum(axis=1) > 1.0  # reflect the far half of the unit square onto the triangle
+    u[flip] = 1.0 - u[flip]
+    return a[tri] + u[:, :1] * (b[tri] - a[tri]) + u[:, 1:] * (c[tri] - a[tri])
+
+
+def polygon_contains(
+    polygon: Float[np.ndarray, "P 2"], points: Float[np.ndarray, "M 2"]
+) -> Bool[np.ndarray, " M"]:
+    """Even–odd rule: inside when a ray towards +x crosses the boundary an odd number of times."""
+    x, z = points[:, 0], points[:, 1]
+    inside = np.zeros(len(points), bool)
+    n = len(polygon)
+    for i in range(n):
+        (xi, zi), (xj, zj) = polygon[i], polygon[(i + 1) % n]
+        if zi == zj:  # a horizontal edge is never crossed by a horizontal ray
+            continue
+        straddles = (zi > z) != (zj > z)
+        inside ^= straddles & (x < xi + (z - zi) * (xj - xi) / (zj - zi))
+    return inside
+
+
+def _left_of(d: np.ndarray) -> np.ndarray:
+    """Unit left normals of directions ``d`` (..., 2); zero where ``d`` is zero."""
+    length = np.linalg.norm(d, axis=-1, keepdims=True)
+    return np.stack([d[..., 1], -d[..., 0]], axis=-1) / np.maximum(length, 1e-300)
+
+
+def _offset_waypoints(
+    waypoints: np.ndarray, loop: bool, offsets: np.ndarray, starts: np.ndarray
+) -> np.ndarray:
+    """Each agent's copy of a path, moved ``offsets[i]`` metres to its walker's left.
+
+    Vertices are mitred so each leg stays ``|offset|`` from the original leg (capped at
+    ``_MAX_MITER·|offset|`` at corners sharper than 120°). On an open path the leg into
+    waypoint 0 is the agent's own approach from ``starts``, so agents coming from a wide spawn
+    region keep their sideways spacing onto the first leg. Returns ``(n, K, 2)``.
+    """
+    n, k = len(starts), len(waypoints)
+    leg = np.roll(waypoints, -1, axis=0) - waypoints  # leg k leaves waypoint k
+    legs = _left_of(leg if loop else leg[:-1])
+    if loop:
+        n_in = np.broadcast_to(np.roll(legs, 1, axis=0), (n, k, 2))
+        n_out = np.broadcast_to(legs, (n, k, 2))
+    else:
+        approach = _left_of(waypoints[None, 0] - starts)[:, None, :]
+        n_out = np.broadcast_to(np.concatenate([legs, legs[-1:]]) if k > 1 else approach, (n, k, 2))
+        # an agent spawned on waypoint 0 has no approach: its first leg stands in for it
+        approach = np.where(np.any(approach != 0, axis=-1, keepdims=True), approach, n_out[:, :1])
+        n_in = np.concatenate([approach, np.broadcast_to(legs[None], (n, k - 1, 2))], axis=1)
+    bis = n_in + n_out  # |bis| = 2 cos(turn / 2)
+    norm = np.linalg.norm(bis, axis=-1, keepdims=True)
+    safe = np.maximum(norm, 1e-12)
+    miter = np.where(
+        norm >= 2.0 / _MAX_MITER,
+        2.0 * bis / safe**2,
+        np.where(norm > 1e-9, _MAX_MITER * bis / safe, n_in),
+    )
+    return waypoints[None] + offsets[:, None, None] * miter
+
+
+def _loop_entry(waypoints: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Per point, the waypoint that ends the loop leg nearest to it (where it joins the loop)."""
+    a = waypoints
+    d = np.roll(waypoints, -1, axis=0) - a  # leg k: waypoint k → k + 1 (mod K)
+    rel = points[:, None, :] - a[None]
+    t = np.clip(np.sum(rel * d, axis=-1) / np.sum(d * d, axis=-1), 0.0, 1.0)
+    gap = np.linalg.norm(rel - t[..., None] * d, axis=-1)
+    return (np.argmin(gap, axis=1) + 1) % len(waypoints)
+
+
+@dataclass(frozen=True, eq=False)
+class Spawn:
+    """The crowd at t = 0, agents of group 0 first (NumPy, host side).
+
+    Attributes:
+        position: ``(N, 2)`` root ``[x, z]`` on the ground (m).
+        heading: ``(N,)`` radians; facing ``(sin θ, 0, cos θ)``, towards the first waypoint.
+        group: ``(N,)`` int32 index into ``scenario.groups``.
+        height: ``(N,)`` standing height (m).
+        speed: ``(N,)`` preferred walking speed (m/s).
+        waypoints: ``(N, K, 2)`` float64, each agent's path, padded with its last waypoint; K is
+            the longest path in the scenario (1 for goal-only scenarios).
+        num_waypoints: ``(N,)`` int32, how many rows of ``waypoints`` are real.
+        loop: ``(N,)`` bool; after its last waypoint a looping agent heads to waypoint 0 again, a
+            non-looping one stops and idles there (goal agents never loop).
+        color: ``(N, 3)`` float32 RGB in [0, 1], the group's colour.
+    """
+
+    position: Float[np.ndarray, "N 2"]
+    heading: Float[np.ndarray, " N"]
+    group: Int[np.ndarray, " N"]
+    height: Float[np.ndarray, " N"]
+    speed: Float[np.ndarray, " N"]
+    waypoints: Float[np.ndarray, "N K 2"]
+    num_waypoints: Int[np.ndarray, " N"]
+    loop: Bool[np.ndarray, " N"]
+    color: Float[np.ndarray, "N 3"]
+
+    @property
+    def num_agents(self) -> int:
+        return len(self.position)
+
+
+def spawn(scenario: Scenario) -> Spawn:
+    """Place every agent of ``scenario``: deterministic from ``scenario.seed``.
+
+    Each group draws from its own stream (``SeedSequence(seed).spawn``), so changing one group
+    leaves the others' agents where they were. Per agent, uniformly: position in the spawn region,
+    speed and height in the group's ranges; then a goal agent gets one waypoint uniform in the goal
+    region (it walks there and idles), and a path agent gets the group's waypoints offset
+    sideways by a uniform lateral offset in ``[−LATERAL_JITTER_M, LATERAL_JITTER_M]`` (so a group
+    does not walk in single file), clipped to the ground. An open path is walked from its first
+    waypoint; a looped path is joined at the end of the leg nearest the spawn point (its
+    waypoints rotated so that one comes first), so agents spread over a loop do not all walk to
+    waypoint 0 first. Initial headings face each agent's first waypoint.
+    """
+    groups = scenario.groups
+    k_max = max(1 if g.path is None else len(g.path.waypoints) for g in groups)
+    lo, hi = scenario.ground.bounds()
+    streams = np.random.SeedSequence(scenario.seed).spawn(len(groups))
+    parts: list[tuple[np.ndarray, ...]] = []
+    for index, (group, stream) in enumerate(zip(groups, streams, strict=True)):
+        rng = np.random.default_rng(stream)
+        n = group.count
+        position = group.spawn.sample(rng, n)
+        speed = rng.uniform(group.speed[0], group.speed[1], size=n)
+        height = rng.uniform(group.height[0], group.height[1], size=n)
+        if group.path is None:  # Group's check makes sure it then has a goal
+            goal = cast("Region", group.goal)
+            waypoints, loop = goal.sample(rng, n)[:, None, :], False
+        else:
+            offsets = rng.uniform(-LATERAL_JITTER_M, LATERAL_JITTER_M, size=n)
+            base = group.path.waypoints
+            moved = np.clip(_offset_waypoints(base, group.path.loop, offsets, position), lo, hi)
+            if group.path.loop:  # each agent joins the loop where it is nearest, walking on
+                order = (_loop_entry(base, position)[:, None] + np.arange(len(base))) % len(base)
+                moved = np.take_along_axis(moved, order[..., None], axis=1)
+            waypoints, loop = moved, group.path.loop
+        to_first = waypoints[:, 0] - position
+        k = waypoints.shape[1]
+        pad = np.repeat(waypoints[:, -1:], k_max - k, axis=1)
+        color = _PALETTE[index % len(_PALETTE)] if group.color is None else group.color
+        parts.append(
+            (
+                position,
+                np.arctan2(to_first[:, 0], to_first[:, 1]),
+                np.full(n, index, np.int32),
+                height,
+                speed,
+                np.concatenate([waypoints, pad], axis=1),
+                np.full(n, k, np.int32),
+                np.full(n, loop, bool),
+                np.broadcast_to(np.asarray(color, np.float32), (n, 3)),
+            )
+        )
+    columns = [np.concatenate(column) for column in zip(*parts, strict=True)]
+    return Spawn(*columns)
