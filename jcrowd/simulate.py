@@ -1,0 +1,123 @@
+"""A scenario and a motion model → a ready-to-step crowd (pure; files are read elsewhere).
+
+:func:`prepare` turns a :class:`~jcrowd.scenario.Scenario` into the three things the step
+needs — the :class:`~jcrowd.clips.CrowdModel`, a static :class:`~jcrowd.crowd.StepConfig` and the
+first :class:`~jcrowd.crowd.CrowdState` — and :meth:`Simulation.view_at` gives the camera at a
+time. The step itself is compiled once per :class:`Simulation` (:meth:`Simulation.compiled`).
+
+LOD settings and the model's level count: a scenario lists distance thresholds independently
+of the model it runs with. The first ``L − 1`` thresholds are used for an ``L``-level model;
+if the scenario lists fewer, the missing ones continue every 20 m past the last. Capacities,
+when given, must have one entry per model level (``lod.capacities``). With
+``importance = "pixels"`` agents are ranked by projected height; levels still come from the
+distance thresholds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jcrowd.clips import CrowdModel, build_crowd_model
+from jcrowd.crowd import CrowdState, Frame, StepConfig, default_capacities, init_state, step
+from jcrowd.errors import ScenarioError
+from jcrowd.lod import CameraView
+from jcrowd.model import MotionModel
+from jcrowd.scenario import Scenario, camera_at
+from jcrowd.scenario_spawn import Spawn, spawn
+
+__all__ = ["Simulation", "prepare", "thresholds_for"]
+
+
+def thresholds_for(thresholds: tuple[float, ...], levels: int) -> tuple[float, ...]:
+    """The first ``levels − 1`` thresholds, continued every 20 m if there are too few."""
+    out = list(thresholds[: levels - 1])
+    while len(out) < levels - 1:
+        out.append((out[-1] if out else 10.0) + 20.0)
+    return tuple(float(t) for t in out)
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """Everything fixed for a run: the prepared model, the step settings, the scenario."""
+
+    crowd: CrowdModel
+    config: StepConfig
+    scenario: Scenario
+    spawn: Spawn
+
+    @property
+    def num_agents(self) -> int:
+        return self.spawn.num_agents
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.scenario.fps
+
+    @property
+    def steps(self) -> int:
+        return max(1, round(self.scenario.duration_s * self.scenario.fps))
+
+    def view_at(self, t: float) -> CameraView:
+        """The scenario camera at time ``t`` (s) as traced arrays."""
+        cam = self.scenario.camera
+        eye, target = camera_at(cam, t)
+        return CameraView(
+            eye=jnp.asarray(eye, jnp.float32),
+            target=jnp.asarray(target, jnp.float32),
+            fov_deg=jnp.asarray(cam.fov_deg, jnp.float32),
+            aspect=jnp.asarray(cam.width / cam.height, jnp.float32),
+            height_px=jnp.asarray(cam.height, jnp.float32),
+        )
+
+    def compiled(self) -> Any:
+        """``jit(step)`` with the model and settings closed over: ``(state, view, dt) → …``."""
+        crowd, config = self.crowd, self.config
+
+        @jax.jit
+        def run(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
+            return step(crowd, config, state, view, dt)
+
+        return run
+
+
+def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdState]:
+    """Build the simulation and its first state (deterministic from ``scenario.seed``)."""
+    crowd = build_crowd_model(model)
+    levels = len(model.levels)
+    lod = scenario.lod
+    agents = scenario.num_agents
+    if lod.capacities is not None and len(lod.capacities) != levels:
+        raise ScenarioError(
+            f"{scenario.source}: lod.capacities: expected {levels} integers (one per level of "
+            f"the model), found {list(lod.capacities)}"
+        )
+    caps = lod.capacities if lod.capacities is not None else default_capacities(agents, levels)
+    config = StepConfig(
+        capacities=tuple(min(int(c), agents) for c in caps),
+        thresholds=thresholds_for(lod.thresholds_m, levels),
+        hysteresis=lod.hysteresis_m,
+        blend_max_level=lod.blend_max_level,
+        importance=lod.screen,
+    )
+    config.check(levels)
+    sp = spawn(scenario)
+    arrays = {
+        "position": sp.position,
+        "heading": sp.heading,
+        "height": sp.height,
+        "speed": sp.speed,
+        "waypoints": sp.waypoints,
+        "num_waypoints": sp.num_waypoints,
+        "loop": sp.loop,
+    }
+    state = init_state(
+        crowd,
+        {k: jnp.asarray(np.asarray(v)) for k, v in arrays.items()},
+        jax.random.key(scenario.seed),
+    )
+    return Simulation(crowd, config, scenario, sp), state
