@@ -89,7 +89,7 @@ def save_recording(path: str | Path, recording: dict[str, np.ndarray]) -> Path:
     from jcrowd.io.atomic import write_atomic
 
     buffer = io.BytesIO()
-    np.savez_compressed(buffer, **recording)
+    np.savez_compressed(buffer, **recording)  # type: ignore[arg-type]  # numpy's stub: **kwds
     write_atomic(path, buffer.getvalue())
     return Path(path)
 
@@ -118,8 +118,8 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
     overflow = deferred = 0
     with Progress(console=Console(file=sys.stderr), transient=True) as bar:
         task = bar.add_task(f"{n:,} agents", total=steps)
-        for k in range(steps):
-            view = sim.view_at(k * sim.dt)
+        for i in range(steps):
+            view = sim.view_at(i * sim.dt)
             t = time.perf_counter()
             new, frame = step(state, view, sim.dt)
             jax.block_until_ready(new)
