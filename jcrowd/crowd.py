@@ -193,7 +193,7 @@ def _agent_level(cm: CrowdModel, level: int, blend: bool, state: CrowdState, i: 
     tau = state.tau[i]
     g = decode_coeffs(lv, state.mix[i], tau)
     if blend:
-        s = _smoothstep((tau - last / 2) / (last / 2)) * state.has_next[i]
+        s = jnp.where(state.has_next[i], _smoothstep((tau - last / 2) / (last / 2)), 0.0)
         g = g + s * (decode_coeffs(lv, state.mix_next[i], tau) - g)
     y = pose_from_coeffs(lv, g)
     h = state.height[i]
@@ -274,7 +274,7 @@ def _schedule(cm: CrowdModel, config: StepConfig, state: CrowdState) -> tuple[Cr
     rows = jnp.arange(n)
     target = state.waypoints[rows, state.waypoint]
     reached = state.alive & (jnp.linalg.norm(target - state.position, axis=1) < config.reach)
-    wp = state.waypoint + reached
+    wp = state.waypoint + reached.astype(jnp.int32)
     done = wp >= state.num_waypoints
     wp = jnp.where(done & state.loop, 0, jnp.minimum(wp, state.num_waypoints - 1))
     alive = state.alive & ~(done & ~state.loop)
@@ -290,7 +290,7 @@ def _schedule(cm: CrowdModel, config: StepConfig, state: CrowdState) -> tuple[Cr
     mix_next = state.mix_next.at[idx].set(a, mode="drop")
     duration_next = state.duration_next.at[idx].set(dur, mode="drop")
     has_next = state.has_next.at[idx].set(True, mode="drop")
-    deferred = jnp.sum(need) - jnp.sum(idx < n)
+    deferred = jnp.sum(need, dtype=jnp.int32) - jnp.sum(idx < n, dtype=jnp.int32)
 
     wrap = state.tau >= last
     take = wrap & has_next

@@ -349,6 +349,10 @@ class Camera:
         _require(_real(self.near) and self.near > 0, "near", "a distance > 0 (m)", self.near)
         ok = _real(self.far) and self.far > self.near
         _require(ok, "far", f"a distance > near = {self.near!r} (m)", self.far)
+        for name in ("fov_deg", "near", "far"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
 
 
 @dataclass(frozen=True, eq=False)
@@ -356,9 +360,9 @@ class LodSettings:
     """Level-of-detail settings for the crowd step (issue 7; paper 000 §5.1).
 
     ``thresholds_m``: increasing distances (m); an agent farther than ``thresholds_m[i]`` is at
-    level i + 1 or coarser, so there are ``len(thresholds_m) + 1`` levels. With
-    ``screen == "pixels"`` importance is an agent's projected height in pixels and a threshold d
-    stands for the pixel height of an agent at distance d (the crowd code converts).
+    level i + 1 or coarser, so there are ``len(thresholds_m) + 1`` levels. ``screen`` is the
+    importance that ranks agents for the capacities: ``"distance"`` to the camera or
+    ``"pixels"`` of projected height; levels always come from the distance thresholds.
     ``hysteresis_m``: the margin an agent must cross beyond a threshold before it changes level
     (≥ 0, less than half the gap between thresholds). ``capacities``: per-level agent budget, the
     coarsest holding every agent; None lets the crowd code derive them from the agent count.
@@ -395,6 +399,7 @@ class LodSettings:
         b = self.blend_max_level
         ok = _is_int(b) and -1 <= b < self.num_levels
         _require(ok, "blend_max_level", f"an integer in [-1, {self.num_levels - 1}]", b)
+        object.__setattr__(self, "blend_max_level", int(b))
         ok = self.screen in ("distance", "pixels")
         _require(ok, "importance", '"distance" or "pixels"', self.screen)
 
@@ -421,8 +426,11 @@ class Scenario:
 
     def __post_init__(self) -> None:
         _require(_is_int(self.seed) and self.seed >= 0, "seed", "an integer ≥ 0", self.seed)
-        for key, v in (("duration", self.duration_s), ("fps", self.fps)):
+        for key, name in (("duration", "duration_s"), ("fps", "fps")):
+            v = getattr(self, name)
             _require(_real(v) and v > 0, key, "a positive number", v)
+            object.__setattr__(self, name, float(v))
+        object.__setattr__(self, "seed", int(self.seed))
         _require(self.ground.kind == "rect", "ground.shape", '"rect"', self.ground.kind)
         object.__setattr__(self, "groups", tuple(self.groups))
         _require(self.groups, "groups", "at least one [[groups]] table", _Raw("none"))
@@ -513,10 +521,9 @@ class _Reader:
         shape = t.get("shape", "rect" if ground else None)
         kinds = ("rect",) if ground else tuple(_SHAPES)
         if shape not in kinds:
+            expected = '"rect"' if ground else '"rect", "circle" or "polygon"'
             found = "nothing" if shape is None else _show(shape)
-            self.fail(
-                _join(path, "shape"), f"expected {' or '.join(map(_show, kinds))}, found {found}"
-            )
+            self.fail(_join(path, "shape"), f"expected {expected}, found {found}")
         keys = _SHAPES[shape]
         self.table(t, path, ("shape", *keys), keys)
         return self.build(path, Region, shape, **{k: t[k] for k in keys})
