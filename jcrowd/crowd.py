@@ -154,9 +154,7 @@ def init_state(
     target = waypoints[:, 0]
     height = jnp.asarray(spawn["height"], jnp.float32)
     speed = jnp.asarray(spawn["speed"], jnp.float32)
-    c, a, dur = jax.vmap(lambda o, c0, t, s, h: next_clip(cm, o, c0, t, s, h, min_reliability))(
-        origin, zero, target, speed, height
-    )
+    c, a, dur = _first_clips(cm, origin, zero, target, speed, height, min_reliability)
     tau = jax.random.uniform(key, (n,), jnp.float32, 0.0, float(cm.frames - 1) / 2)
     return CrowdState(
         position=pos,
@@ -179,6 +177,12 @@ def init_state(
         loop=jnp.asarray(spawn["loop"], bool),
         waypoint=jnp.zeros(n, jnp.int32),
     )
+
+
+@eqx.filter_jit
+def _first_clips(cm: CrowdModel, *args: Array) -> tuple[Array, Array, Array]:
+    *arrays, min_reliability = args
+    return jax.vmap(lambda o, c0, t, s, h: next_clip(cm, o, c0, t, s, h, min_reliability))(*arrays)
 
 
 def _smoothstep(x: Array) -> Array:

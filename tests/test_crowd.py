@@ -96,8 +96,8 @@ def test_jit_equals_eager(model):
     sim, state = _sim(model, count=6)
     eager = lambda s, v, dt: step(sim.crowd, sim.config, s, v, dt)  # noqa: E731
     with jax.disable_jit():
-        s_eager, f_eager = _run(sim, state, 2, eager)
-    s_jit, f_jit = _run(sim, state, 2)
+        s_eager, _ = _run(sim, state, 2, eager)
+    s_jit, _ = _run(sim, state, 2)
     for a, b in zip(jax.tree.leaves(s_eager), jax.tree.leaves(s_jit), strict=True):
         # Eager runs op by op in float32; jit fuses (FMA, reassociation): ~1e-6 of 1–20 m.
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-5, atol=2e-5)
@@ -164,7 +164,7 @@ def test_path_with_corner_is_walked_and_open_path_ends(model):
     fn = sim.compiled()
     best = np.full((3, 2), np.inf)
     heading_steps = []
-    for i in range(int(90 * 30)):
+    for _ in range(90 * 30):
         before = np.asarray(state.heading)
         state, _ = fn(state, sim.view_at(0.0), sim.dt)
         heading_steps.append(np.abs(np.asarray(state.heading) - before))
@@ -211,8 +211,13 @@ def _run_sharded(devices):
     env["JAX_PLATFORMS"] = "cpu"
     text = SCENE.format(count=32)
     out = subprocess.run(
-        [sys.executable, "-c", SHARDED], input=text, env=env, capture_output=True, text=True,
-        check=True, timeout=300,
+        [sys.executable, "-c", SHARDED],
+        input=text,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=300,
     )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
