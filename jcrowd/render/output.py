@@ -6,19 +6,23 @@ target's folder (``.NAME.XXXX.mp4``) and renamed over the target when the writer
 without error. On error, or when the ``with`` block raises, the temporary file is removed and
 an existing target is left untouched.
 
-MP4 is H.264 (``libx264``, ``yuv420p`` so every player opens it) through the ffmpeg binary
-that imageio-ffmpeg ships; yuv420p needs an even width and height. GIF goes through Pillow.
+MP4 is H.264 (``libx264``, ``yuv420p`` so every player opens it, ``+faststart`` so it streams)
+encoded by the ffmpeg binary that imageio-ffmpeg ships; yuv420p needs an even width and
+height. We start ffmpeg ourselves rather than through ``imageio_ffmpeg.write_frames``: that
+helper forks with a ``preexec_fn``, which runs fork handlers in a process that JAX has made
+multithreaded (JAX warns of deadlocks), while a plain ``Popen`` spawns without them. GIF goes
+through imageio's Pillow plugin.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import subprocess
 import tempfile
-from collections.abc import Generator
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import IO, Any
 
 import imageio.v3 as iio
 import imageio_ffmpeg
@@ -31,6 +35,8 @@ __all__ = ["VIDEO_SUFFIXES", "VideoWriter", "write_png"]
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 """File suffixes :class:`VideoWriter` can write."""
+
+_FFMPEG_TIMEOUT_S = 120.0  # finishing a clip (flush + faststart rewrite) never takes this long
 
 
 def write_png(path: str | os.PathLike[str], image: np.ndarray) -> None:
@@ -55,15 +61,15 @@ class VideoWriter:
     Args:
         path: the clip to write; its suffix (``.mp4`` or ``.gif``) picks the format.
         fps: frames per second (> 0).
-        quality: MP4 quality from 0 (worst) to 10 (best); 7 keeps thin bones and grid lines
-            sharp at modest size.
+        crf: H.264 constant rate factor for MP4, 0 (lossless) to 51 (worst); 20 keeps thin
+            bones and grid lines sharp at modest size.
 
     The first frame fixes the size; every frame must be ``(H, W, 3)`` uint8 of that size, and
     for MP4 ``H`` and ``W`` must be even. Nothing exists under ``path`` until :meth:`close`
     succeeds; a clip with no frames is an error.
     """
 
-    def __init__(self, path: str | os.PathLike[str], fps: float = 30.0, *, quality: float = 7.0):
+    def __init__(self, path: str | os.PathLike[str], fps: float = 30.0, *, crf: int = 20):
         self.path = Path(path)
         self.suffix = self.path.suffix.lower()
         if self.suffix not in VIDEO_SUFFIXES:
@@ -73,13 +79,14 @@ class VideoWriter:
             )
         if not fps > 0:
             raise RenderError(f"{where(path)}: expected a positive frame rate, found {fps}")
-        if not 0 <= quality <= 10:
-            raise RenderError(f"{where(path)}: expected quality in [0, 10], found {quality}")
-        self.fps, self.quality = float(fps), float(quality)
+        if not 0 <= crf <= 51:
+            raise RenderError(f"{where(path)}: expected crf in [0, 51], found {crf}")
+        self.fps, self.crf = float(fps), int(crf)
         self.frames_written = 0
-        self._size: tuple[int, int] | None = None  # (height, width)
+        self._size: tuple[int, int] | None = None  # (height, width), fixed by the first frame
         self._tmp: str | None = None
-        self._encoder: Generator[Any, Any, None] | None = None
+        self._ffmpeg: subprocess.Popen[bytes] | None = None
+        self._log: IO[bytes] | None = None  # ffmpeg's stderr, read back for error messages
         self._gif_frames: list[np.ndarray] = []
         self._closed = False
 
@@ -102,59 +109,65 @@ class VideoWriter:
                 f"{where(self.path)}: frame {self.frames_written} is {w}×{h}, the clip is "
                 f"{self._size[1]}×{self._size[0]}"
             )
-        try:
-            if self._encoder is not None:
-                self._encoder.send(np.ascontiguousarray(img))
-            else:
-                self._gif_frames.append(img.copy())
-        except (OSError, RuntimeError) as e:
-            self.abort()
-            raise RenderError(
-                f"{where(self.path)}: encoding frame {self.frames_written}: {e}"
-            ) from e
+        if self._ffmpeg is None:
+            self._gif_frames.append(img.copy())
+        else:
+            stdin = self._ffmpeg.stdin
+            try:
+                if stdin is None:
+                    raise OSError("ffmpeg has no input pipe")
+                stdin.write(np.ascontiguousarray(img).tobytes())
+            except OSError as e:  # BrokenPipeError when ffmpeg has died
+                log = self._ffmpeg_log()
+                self.abort()
+                raise RenderError(
+                    f"{where(self.path)}: ffmpeg stopped at frame {self.frames_written}: {e}; {log}"
+                ) from e
         self.frames_written += 1
 
     def close(self) -> None:
         """Finish the clip and move it to ``path``. Idempotent once it has succeeded."""
         if self._closed:
             return
-        if self.frames_written == 0:
+        tmp = self._tmp
+        if self.frames_written == 0 or tmp is None:
             self.abort()
             raise RenderError(f"{where(self.path)}: no frames were written")
-        tmp = self._tmp
-        if tmp is None:  # cannot happen: the first append opens it
-            raise RenderError(f"{where(self.path)}: the clip was never opened")
         try:
-            if self._encoder is not None:
-                self._encoder.close()  # waits for ffmpeg to finish the file
-                self._encoder = None
+            if self._ffmpeg is not None:
+                self._finish_ffmpeg()
             else:
-                duration_ms = 1000.0 / self.fps
                 iio.imwrite(
                     tmp,
                     np.stack(self._gif_frames),
                     extension=".gif",
-                    duration=duration_ms,
+                    duration=1000.0 / self.fps,  # Pillow wants milliseconds per frame
                     loop=0,
                 )
                 self._gif_frames = []
             with open(tmp, "rb+") as f:
                 os.fsync(f.fileno())
-            os.chmod(tmp, 0o644)
+            os.chmod(tmp, 0o644)  # mkstemp made it private
             os.replace(tmp, self.path)
-        except (OSError, RuntimeError, ValueError) as e:
+        except (OSError, ValueError, subprocess.SubprocessError) as e:
             self.abort()
             raise RenderError(f"{where(self.path)}: cannot finish the clip: {e}") from e
         self._tmp = None
         self._closed = True
 
     def abort(self) -> None:
-        """Stop without writing ``path``: end the encoder and remove the temporary file."""
+        """Stop without writing ``path``: end ffmpeg and remove the temporary file."""
         self._closed = True
-        if self._encoder is not None:
-            with contextlib.suppress(Exception):  # the encoder may already be broken
-                self._encoder.close()
-            self._encoder = None
+        if self._ffmpeg is not None:
+            if self._ffmpeg.stdin is not None:
+                with contextlib.suppress(OSError):
+                    self._ffmpeg.stdin.close()
+            self._ffmpeg.kill()
+            self._ffmpeg.wait()
+            self._ffmpeg = None
+        if self._log is not None:
+            self._log.close()
+            self._log = None
         self._gif_frames = []
         if self._tmp is not None:
             with contextlib.suppress(OSError):
@@ -176,34 +189,59 @@ class VideoWriter:
             self.abort()
 
     def _open(self) -> None:
-        """Create the temporary file and, for MP4, start ffmpeg writing into it."""
-        folder = self.path.resolve().parent
+        """Create the temporary file and, for MP4, start ffmpeg encoding into it."""
         try:
             fd, self._tmp = tempfile.mkstemp(
-                dir=folder, prefix=f".{self.path.name}.", suffix=self.suffix
+                dir=self.path.resolve().parent, prefix=f".{self.path.name}.", suffix=self.suffix
             )
             os.close(fd)
         except OSError as e:
             self._closed = True
             raise RenderError(f"{where(self.path)}: cannot write: {e.strerror or e}") from e
-        if self.suffix != ".mp4":
+        if self.suffix != ".mp4" or self._size is None:
             return
-        h, w = self._size or (0, 0)
+        h, w = self._size
+        # Input: raw RGB frames on stdin. Output: H.264 yuv420p into the temporary file.
+        cmd: list[str] = [
+            imageio_ffmpeg.get_ffmpeg_exe(),
+            *("-y", "-hide_banner", "-loglevel", "error", "-nostdin"),
+            *("-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{w}x{h}", "-r", f"{self.fps:g}"),
+            *("-i", "pipe:0", "-an", "-c:v", "libx264", "-pix_fmt", "yuv420p"),
+            *("-crf", str(self.crf), "-movflags", "+faststart", "-f", "mp4", self._tmp),
+        ]
         try:
-            self._encoder = imageio_ffmpeg.write_frames(
-                self._tmp,
-                (w, h),
-                fps=self.fps,
-                codec="libx264",
-                pix_fmt_out="yuv420p",
-                quality=self.quality,
-                macro_block_size=1,  # sizes are checked to be even above; never rescale
-                output_params=["-movflags", "+faststart"],
+            self._log = tempfile.TemporaryFile()
+            self._ffmpeg = subprocess.Popen(
+                cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=self._log
             )
-            self._encoder.send(None)  # start the generator (launches ffmpeg)
         except (OSError, RuntimeError) as e:
             self.abort()
             raise RenderError(f"{where(self.path)}: cannot start ffmpeg: {e}") from e
+
+    def _finish_ffmpeg(self) -> None:
+        """Close ffmpeg's input, wait for it, and raise if it failed."""
+        proc = self._ffmpeg
+        if proc is None or proc.stdin is None:
+            return
+        proc.stdin.close()
+        code = proc.wait(timeout=_FFMPEG_TIMEOUT_S)
+        log = self._ffmpeg_log()
+        self._ffmpeg = None
+        if self._log is not None:
+            self._log.close()
+            self._log = None
+        if code != 0:
+            raise OSError(f"ffmpeg exited with status {code}; {log}")
+
+    def _ffmpeg_log(self) -> str:
+        """The last lines ffmpeg wrote to stderr (for error messages)."""
+        if self._log is None:
+            return "ffmpeg said nothing"
+        with contextlib.suppress(OSError):
+            self._log.seek(0)
+            text = self._log.read().decode("utf-8", "replace").strip()
+            return f"ffmpeg said: {text[-500:]}" if text else "ffmpeg said nothing"
+        return "ffmpeg's log is unreadable"
 
 
 def _check_image(image: Any, context: str, channels: tuple[int, ...]) -> np.ndarray:

@@ -130,6 +130,7 @@ class _Level:
         )
 
     def release(self) -> None:
+        """Free this level's vertex array and instance buffer."""
         self.vao.release()
         self.instances.release()
 
@@ -149,6 +150,10 @@ class CrowdRenderer:
         ground_size: side of the square ground plane centred on the origin (m).
         background: clear colour, RGB in [0, 1].
         ground: draw the ground plane and its grid.
+        detail: per level, the capsule tessellation ``(segments, rings)``; by default
+            :func:`~jcrowd.render.meshes.capsule_detail` of the level (64 triangles per bone at
+            level 0, fewer for farther levels). Coarser capsules render faster, most of all on
+            a software rasteriser.
     """
 
     def __init__(
@@ -164,60 +169,79 @@ class CrowdRenderer:
         ground_size: float = 200.0,
         background: tuple[float, float, float] = (0.85, 0.88, 0.92),
         ground: bool = True,
+        detail: Sequence[tuple[int, int]] | None = None,
     ) -> None:
         meshes = [LevelMesh(tuple(p)) for p in levels]
         caps = [int(c) for c in capacity]
         _check_args(meshes, caps, width, height, samples, bone_radius, ground_size, background)
+        details = [capsule_detail(i) for i in range(len(meshes))] if detail is None else detail
+        if len(details) != len(meshes):
+            raise RenderError(
+                f"CrowdRenderer: expected {len(meshes)} capsule details (one per level), found "
+                f"{len(details)}"
+            )
+        details = [(int(seg), int(rings)) for seg, rings in details]
+        for seg, rings in details:
+            capsule_mesh(seg, rings)  # validates before any GL object exists
         self.width, self.height = int(width), int(height)
         r, g, b = (float(c) for c in background)
         self.background = (r, g, b)
         self.bone_radius = float(bone_radius)
         self.ground_size = float(ground_size)
         self._draw_ground = bool(ground)
+        self.samples = samples if samples > 1 else 0
         self._owns_ctx = ctx is None
         self.ctx = make_context() if ctx is None else ctx
         self._released = False
-        if samples > 1 and samples > self.ctx.max_samples:
-            self._release_ctx()
-            raise RenderError(
-                f"CrowdRenderer: {samples} MSAA samples asked, the driver allows at most "
-                f"{self.ctx.max_samples}"
-            )
-        self.samples = samples if samples > 1 else 0
-        ctx_ = self.ctx
         self._objects: list[Any] = []
-        self._capsule = ctx_.program(vertex_shader=CAPSULE_VERTEX, fragment_shader=CAPSULE_FRAGMENT)
-        self._ground_prog = ctx_.program(
+        self._levels: list[_Level] = []
+        try:
+            self._build(meshes, caps, details)
+        except BaseException:
+            self.release()  # frees whatever was made, and the context if it is ours
+            raise
+
+    def _build(
+        self, meshes: list[LevelMesh], caps: list[int], details: list[tuple[int, int]]
+    ) -> None:
+        """Compile the shaders and allocate every buffer and framebuffer (once, here)."""
+        ctx = self.ctx
+        if self.samples > ctx.max_samples:
+            raise RenderError(
+                f"CrowdRenderer: {self.samples} MSAA samples asked, the driver allows at most "
+                f"{ctx.max_samples}"
+            )
+        self._capsule = ctx.program(vertex_shader=CAPSULE_VERTEX, fragment_shader=CAPSULE_FRAGMENT)
+        self._objects.append(self._capsule)
+        self._ground_prog = ctx.program(
             vertex_shader=GROUND_VERTEX, fragment_shader=GROUND_FRAGMENT
         )
-        self._objects += [self._capsule, self._ground_prog]
+        self._objects.append(self._ground_prog)
         geometries: dict[tuple[int, int], tuple[moderngl.Buffer, moderngl.Buffer]] = {}
-        self._levels: list[_Level] = []
-        for i, (mesh, cap) in enumerate(zip(meshes, caps, strict=True)):
-            detail = capsule_detail(i)
+        for mesh, cap, detail in zip(meshes, caps, details, strict=True):
             if detail not in geometries:
                 vertices, triangles = capsule_mesh(*detail)
-                vbo, ibo = ctx_.buffer(vertices.tobytes()), ctx_.buffer(triangles.tobytes())
+                vbo, ibo = ctx.buffer(vertices.tobytes()), ctx.buffer(triangles.tobytes())
                 self._objects += [vbo, ibo]
                 geometries[detail] = (vbo, ibo)
-            self._levels.append(_Level(ctx_, self._capsule, mesh, cap, geometries[detail]))
-        self._ground_vbo = ctx_.buffer(ground_mesh(self.ground_size).tobytes())
-        self._ground_vao = ctx_.vertex_array(
-            self._ground_prog, [(self._ground_vbo, "3f", "in_position")]
-        )
-        self._objects += [self._ground_vbo, self._ground_vao]
+            self._levels.append(_Level(ctx, self._capsule, mesh, cap, geometries[detail]))
+        ground_vbo = ctx.buffer(ground_mesh(self.ground_size).tobytes())
+        self._objects.append(ground_vbo)
+        self._ground_vao = ctx.vertex_array(self._ground_prog, [(ground_vbo, "3f", "in_position")])
+        self._objects.append(self._ground_vao)
         size = (self.width, self.height)
-        self._resolved = ctx_.simple_framebuffer(size, components=4)
+        self._resolved = ctx.simple_framebuffer(size, components=4)
         self._objects.append(self._resolved)
+        self._target = self._resolved
         if self.samples:
-            self._color_ms = ctx_.renderbuffer(size, components=4, samples=self.samples)
-            self._depth_ms = ctx_.depth_renderbuffer(size, samples=self.samples)
-            self._target = ctx_.framebuffer(self._color_ms, self._depth_ms)
-            self._objects += [self._target, self._color_ms, self._depth_ms]
-        else:
-            self._target = self._resolved
+            color = ctx.renderbuffer(size, components=4, samples=self.samples)
+            self._objects.append(color)
+            depth = ctx.depth_renderbuffer(size, samples=self.samples)
+            self._objects.append(depth)
+            self._target = ctx.framebuffer(color, depth)
+            self._objects.append(self._target)
         self._set_constant_uniforms()
-        check_gl(ctx_, "renderer setup")
+        check_gl(ctx, "renderer setup")
 
     @property
     def renderer_name(self) -> str:
@@ -280,7 +304,8 @@ class CrowdRenderer:
             return
         self._released = True
         bound = self.ctx.fbo
-        if bound is not None and bound.glo in (self._target.glo, self._resolved.glo):
+        ours = {obj.glo for obj in self._objects if isinstance(obj, moderngl.Framebuffer)}
+        if bound is not None and bound.glo in ours:
             # moderngl re-binds the last used framebuffer after creating another one; if that
             # is ours and deleted, a later renderer on a shared context gets
             # GL_INVALID_OPERATION. Bind the default framebuffer (0) instead.

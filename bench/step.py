@@ -1,0 +1,243 @@
+"""Benchmark of the crowd step (issue 7; paper 000 §5, paper 003 §6): ms per step vs agents.
+
+Plaza made in code: N agents uniformly in a square at 1 agent per 10 m², each walking to a
+random point of the square, camera at the near edge 1.7 m high looking across, 60° vertical
+fov, 1280×720, the shipped default model and the default LOD budget. Columns: compile s,
+ms/step (median over steps after warm-up, ``block_until_ready``), agent-steps/s, the mean level
+histogram (last = culled), bytes of state per agent.
+
+In the same run, on the same agents:
+
+- **naive interpolation** (paper 000's comparison): every agent-frame blends all S aligned
+  samples with its kriging weights (the samples as stored full-size ``(S, T, P)`` pose vectors,
+  reconstructed from the model), full skeleton FK, no tensor, no LOD;
+- **full detail**: the level-0 decode + FK for every agent (agent-frames/s);
+- **roof**: bytes the step must move (state read + written, drawn points written) divided by
+  the bandwidth of a large copy measured in this process.
+
+``python bench/step.py [--agents 1000,100000] [--json]``; appends a row to bench/RESULTS.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from common import append_result, machine
+
+from jcrowd import load_default_model
+from jcrowd.model import MotionModel
+from jcrowd.posevec import PoseLayout
+from jcrowd.rotation import quat_from_expmap, quat_mul, yaw_quat
+from jcrowd.scenario import parse_scenario
+from jcrowd.simulate import prepare
+from jcrowd.skeleton import forward_kinematics
+from jcrowd.synthesis import decode_coeffs, level_points, pose_from_coeffs
+
+PLAZA = """
+model = "default"
+seed = 1
+duration = 60.0
+[ground]
+center = [0, 0]
+size = [{side}, {side}]
+[camera]
+eye = [0, 1.7, {eye_z}]
+target = [0, 1.0, 0]
+fov = 60
+width = 1280
+height = 720
+[[groups]]
+name = "plaza"
+count = {n}
+spawn = {{ shape = "rect", center = [0, 0], size = [{inner}, {inner}] }}
+goal = {{ shape = "rect", center = [0, 0], size = [{inner}, {inner}] }}
+"""
+
+
+def _median_ms(fn: Any, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        jax.block_until_ready(fn())
+        times.append(time.perf_counter() - t)
+    return 1e3 * float(np.median(times))
+
+
+def bandwidth_gbs() -> float:
+    """GB/s of ``x + 1`` over 256 MB (reads and writes counted)."""
+    x = jnp.ones(64 * 2**20, jnp.float32)
+    f = jax.jit(lambda x: x + 1)
+    jax.block_until_ready(f(x))
+    ms = _median_ms(lambda: f(x), 5)
+    return 2 * x.nbytes / (ms * 1e-3) / 1e9
+
+
+def _naive_kernel(model: MotionModel, samples: jax.Array, layout: PoseLayout) -> Any:
+    """One agent-frame of naive interpolation: Σ b_i Y_i(τ), full FK."""
+    skel = model.skeleton
+    ref = jnp.asarray(layout.reference[1:], jnp.float32)
+    t_last = samples.shape[1] - 1
+    joints = layout.num_joints
+
+    def one(b: jax.Array, tau: jax.Array, xz: jax.Array, heading: jax.Array) -> jax.Array:
+        i0 = jnp.minimum(jnp.floor(tau), t_last - 1)
+        frac = tau - i0
+        rows = jax.lax.dynamic_slice_in_dim(samples, i0.astype(jnp.int32), 2, axis=1)
+        y2 = jnp.einsum("s,stp->tp", b, rows)
+        y = y2[0] + frac * (y2[1] - y2[0])
+        root = quat_mul(yaw_quat(heading), quat_from_expmap(y[4:7]))
+        e = y[7 : 7 + 3 * (joints - 1)].reshape(joints - 1, 3)
+        local = jnp.concatenate([root[None], quat_mul(ref, quat_from_expmap(e))], axis=0)
+        base = jnp.stack([xz[0], y[0] * 1.7, xz[1]])
+        _, pos = forward_kinematics(skel.scaled(1.7), local, base)
+        return pos
+
+    return jax.jit(jax.vmap(one))
+
+
+def naive_ms(model: MotionModel, n: int, repeats: int) -> float:
+    lv = model.levels[0]
+    k = lv.kriging
+    cores = np.asarray(k.residuals) + np.concatenate(
+        [np.ones((k.num_samples, 1)), np.asarray(k.controls - k.control_mean) / k.control_scale],
+        axis=1,
+    ) @ np.asarray(k.trend)
+    cores = cores.reshape(k.num_samples, *lv.u_pose.shape[1:], lv.u_time.shape[1])
+    y = np.einsum("pr,srt,Tt->sTp", lv.u_pose, cores, lv.u_time) * model.layout.scale
+    samples = jnp.asarray(y, jnp.float32)  # (S, T, P): the full-size aligned samples
+    rng = np.random.default_rng(0)
+    b = rng.dirichlet(np.ones(k.num_samples), n).astype(np.float32)
+    tau = jnp.asarray(rng.uniform(0, 98, n), jnp.float32)
+    xz = jnp.asarray(rng.uniform(-50, 50, (n, 2)), jnp.float32)
+    heading = jnp.asarray(rng.uniform(-3, 3, n), jnp.float32)
+    f = _naive_kernel(model, samples, model.layout)
+    b = jnp.asarray(b)
+    jax.block_until_ready(f(b, tau, xz, heading))
+    return _median_ms(lambda: f(b, tau, xz, heading), repeats)
+
+
+def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
+    """Agent-frames/s of level-0 decode + FK for ``n`` agents (every agent at full detail)."""
+    lv = sim.crowd.decoders.levels[0]
+
+    def one(a: jax.Array, tau: jax.Array, xz: jax.Array, h: jax.Array, hd: jax.Array) -> Any:
+        return level_points(lv, pose_from_coeffs(lv, decode_coeffs(lv, a, tau)), xz, hd, h)
+
+    f = jax.jit(jax.vmap(one))
+    args = (state.mix, state.tau, state.position, state.height, state.heading)
+    args = tuple(x[:n] for x in args)
+    jax.block_until_ready(f(*args))
+    return n / (_median_ms(lambda: f(*args), repeats) * 1e-3)
+
+
+def run_count(model: MotionModel, n: int, steps: int, bw: float) -> dict[str, Any]:
+    side = float(np.sqrt(10.0 * n))
+    text = PLAZA.format(side=side + 2, inner=side, eye_z=-side / 2 - 0.5, n=n)
+    sim, state = prepare(parse_scenario(text, "bench-plaza.toml"), model)
+    fn = sim.compiled()
+    view, dt = sim.view_at(0.0), sim.dt
+    t = time.perf_counter()
+    jax.block_until_ready(fn(state, view, dt))
+    compile_s = time.perf_counter() - t
+    for _ in range(3):  # warm-up: past the first clip choices
+        state, frame = fn(state, view, dt)
+    times, hist = [], np.zeros(len(sim.config.capacities) + 1)
+    for _ in range(steps):
+        t = time.perf_counter()
+        state, frame = fn(state, view, dt)
+        jax.block_until_ready(state)
+        times.append(time.perf_counter() - t)
+        hist += np.bincount(np.asarray(frame.level), minlength=len(hist))
+    ms = 1e3 * float(np.median(times))
+    state_bytes = sum(x.nbytes for x in jax.tree.leaves(state))
+    points = sum(int(np.prod(p.shape)) * 4 for p in frame.points)
+    roof_ms = (2 * state_bytes + points) / (bw * 1e9) * 1e3
+    return {
+        "agents": n,
+        "compile_s": compile_s,
+        "ms_per_step": ms,
+        "agent_steps_per_s": n / (ms * 1e-3),
+        "level_histogram": (hist / steps).round(1).tolist(),
+        "state_bytes_per_agent": state_bytes / n,
+        "roof_ms_per_step": roof_ms,
+        "recompiles": fn._cache_size() - 1,
+        "_sim": (sim, state),
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--agents", default="1000,10000,100000,1000000")
+    ap.add_argument("--steps", type=int, default=20)
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--no-record", action="store_true")
+    args = ap.parse_args()
+    counts = [int(v) for v in args.agents.split(",")]
+    model = load_default_model()
+    bw = bandwidth_gbs()
+    rows, naive, speedup = [], {}, {}
+    full_rate = 0.0
+    for n in counts:
+        steps = args.steps if n < 1_000_000 else max(3, args.steps // 4)
+        row = run_count(model, n, steps, bw)
+        sim, state = row.pop("_sim")
+        naive[str(n)] = naive_ms(model, n, 3)
+        speedup[str(n)] = naive[str(n)] / row["ms_per_step"]
+        if n == min(max(counts), 100_000) or n == max(counts):
+            full_rate = max(full_rate, full_detail_rate(sim, state, min(n, 100_000), 3))
+        rows.append(row)
+        print(f"{n:,} agents: {row['ms_per_step']:.1f} ms/step", file=sys.stderr)
+    out = {
+        "rows": rows,
+        "naive_ms_per_step": naive,
+        "speedup_vs_naive": speedup,
+        "full_detail_agent_frames_per_s": full_rate,
+        "roof_ms_per_step": {str(r["agents"]): r["roof_ms_per_step"] for r in rows},
+        "state_bytes_per_agent": rows[-1]["state_bytes_per_agent"],
+        "bandwidth_gbs": bw,
+        "device": str(jax.devices()[0].platform),
+        "machine": machine(),
+        "jax": jax.__version__,
+    }
+    text = _table(out)
+    if args.json:
+        sys.stdout.write(json.dumps(out, indent=2) + "\n")
+    else:
+        print(text)
+    if not args.no_record:
+        append_result("step", f"{out['machine']}, jax {out['jax']}, {out['device']}", text)
+
+
+def _table(out: dict[str, Any]) -> str:
+    lines = [
+        "| agents | compile s | ms/step | agent-steps/s | levels 0…5, culled (mean) | "
+        "state B/agent | roof ms | naive ms | speed-up vs naive |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in out["rows"]:
+        n = str(r["agents"])
+        hist = " / ".join(f"{v:g}" for v in r["level_histogram"])
+        lines.append(
+            f"| {r['agents']:,} | {r['compile_s']:.1f} | {r['ms_per_step']:.2f} | "
+            f"{r['agent_steps_per_s']:.3g} | {hist} | {r['state_bytes_per_agent']:.0f} | "
+            f"{r['roof_ms_per_step']:.2f} | {out['naive_ms_per_step'][n]:.1f} | "
+            f"{out['speedup_vs_naive'][n]:.1f}× |"
+        )
+    lines += [
+        "",
+        f"full detail (level-0 decode + FK, every agent): "
+        f"{out['full_detail_agent_frames_per_s']:.3g} agent-frames/s; "
+        f"copy bandwidth {out['bandwidth_gbs']:.1f} GB/s",
+    ]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    main()
