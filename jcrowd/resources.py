@@ -7,7 +7,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-__all__ = ["default_model_path", "load_default_model", "sample_bvh_path"]
+__all__ = ["default_model_path", "demo_scenario_path", "load_default_model", "sample_bvh_path"]
 
 
 def _asset(name: str) -> Path:
@@ -29,6 +29,12 @@ def default_model_path() -> Path:
     its range covers heading changes of about −105° to +89° per gait cycle (mirrored samples).
     """
     return _asset("default_model.jcm")
+
+
+def demo_scenario_path() -> Path:
+    """The plaza scenario ``jcrowd demo`` runs: a copy of ``examples/plaza.toml`` (a test keeps
+    the two identical), shipped so the demo works from an installed wheel."""
+    return _asset("plaza.toml")
 
 
 def load_default_model() -> Any:

@@ -23,9 +23,12 @@ Handler = Callable[[argparse.Namespace], dict[str, Any]]
 
 
 def _build_parser() -> tuple[argparse.ArgumentParser, dict[str, Handler]]:
+    from jcrowd.cli import demo as demo_cmd
     from jcrowd.cli import eval as eval_cmd
+    from jcrowd.cli import export as export_cmd
     from jcrowd.cli import fit as fit_cmd
     from jcrowd.cli import inspect as inspect_cmd
+    from jcrowd.cli import render as render_cmd
     from jcrowd.cli import run as run_cmd
     from jcrowd.cli import simplify as simplify_cmd
 
@@ -36,7 +39,16 @@ def _build_parser() -> tuple[argparse.ArgumentParser, dict[str, Handler]]:
     parser.add_argument("--version", action="version", version=f"jcrowd {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     handlers: dict[str, Handler] = {}
-    for module in (inspect_cmd, simplify_cmd, fit_cmd, eval_cmd, run_cmd):
+    for module in (
+        inspect_cmd,
+        simplify_cmd,
+        fit_cmd,
+        eval_cmd,
+        run_cmd,
+        render_cmd,
+        export_cmd,
+        demo_cmd,
+    ):
         p = module.add_parser(sub)
         p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
         handlers[p.prog.split()[-1]] = module.run

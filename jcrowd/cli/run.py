@@ -15,7 +15,8 @@ Recording (``--out run.npz``, written atomically):
 
 Arrays are named ``position``, ``heading``, ``level``, ``alive``, ``slots_l``, ``valid_l``,
 ``points_l``, ``tau``, ``control``, ``control_next``, ``has_next`` plus ``height``, ``group``,
-``color``, ``parents`` (bones to draw), ``fps`` and ``model`` (the model file used).
+``color``, ``parents`` (bones to draw), ``eye``/``target`` per step and ``lens`` (fov, near,
+far) of the camera, ``fps`` and ``model`` (the model file used).
 """
 
 from __future__ import annotations
@@ -106,7 +107,9 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
     t0 = time.perf_counter()
     jax.block_until_ready(step(state, sim.view_at(0.0), sim.dt))  # compile (+ one step, dropped)
     compile_s = time.perf_counter() - t0
-    rec: dict[str, list] = {k: [] for k in ("position", "heading", "level", "alive")}
+    rec: dict[str, list] = {
+        k: [] for k in ("position", "heading", "level", "alive", "eye", "target")
+    }
     if record in ("visible", "all"):
         for lv in range(nlev):
             for k in ("slots", "valid", "points"):
@@ -130,6 +133,8 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
                     "heading": state.heading,
                     "level": frame.level,
                     "alive": state.alive,
+                    "eye": view.eye,
+                    "target": view.target,
                     **(
                         {
                             k: getattr(state, k)
@@ -158,11 +163,13 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
             bar.advance(task)
     recompiles = step._cache_size() - 1
     recording = {k: np.stack(v) for k, v in rec.items()}
+    cam = sim.scenario.camera
     recording.update(
         height=np.asarray(sim.spawn.height, np.float32),
         group=np.asarray(sim.spawn.group, np.int32),
         color=np.asarray(sim.spawn.color, np.float32),
         fps=np.asarray(sim.scenario.fps),
+        lens=np.asarray([cam.fov_deg, cam.near, cam.far], np.float64),
         levels=np.asarray(nlev),
     )
     result = {

@@ -1,0 +1,241 @@
+"""``jcrowd render SCENARIO.toml|RUN.npz --out out.mp4|out.gif|DIR``: headless crowd rendering.
+
+From a scenario the crowd is stepped and drawn frame by frame (step and draw timed apart); from
+a recording of ``jcrowd run --record visible|all`` the recorded joints are drawn. One instanced
+draw per LOD level, agents coloured by level (default, like paper 000 Fig. 6) or by group. The
+output is an MP4 or GIF clip, or a folder of numbered PNG frames. ``--json`` prints ``frames``,
+``out``, ``ms_per_frame_median`` (drawing and read-back), ``ms_per_step_median`` (scenarios).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["add_parser", "parse_size", "render_scenario", "run"]
+
+
+def add_parser(sub: Any) -> argparse.ArgumentParser:
+    p: argparse.ArgumentParser = sub.add_parser(
+        "render", help="render a scenario or a recorded run", description=__doc__
+    )
+    p.add_argument("source", help="a scenario (.toml) or a recording (.npz) of jcrowd run")
+    p.add_argument("--out", required=True, help="out.mp4, out.gif or a folder for PNG frames")
+    p.add_argument("--size", help="WIDTHxHEIGHT (default: the scenario camera's)")
+    p.add_argument("--frames", type=int, help="frames to render (default: all)")
+    p.add_argument("--color-by", choices=("level", "group"), default="level")
+    p.add_argument("--model", help="model file for a scenario (default: the scenario's)")
+    return p
+
+
+def parse_size(text: str | None, default: tuple[int, int]) -> tuple[int, int]:
+    """``"1280x720"`` → ``(1280, 720)``; positive even numbers."""
+    from jcrowd.errors import RenderError
+
+    if text is None:
+        return default
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise RenderError(f"--size: expected WIDTHxHEIGHT like 1280x720, found {text!r}") from None
+    if w <= 0 or h <= 0 or w % 2 or h % 2:
+        raise RenderError(f"--size: expected positive even numbers, found {text!r}")
+    return w, h
+
+
+class _Sink:
+    """Frames to a clip (.mp4/.gif) or to numbered PNGs in a folder."""
+
+    def __init__(self, out: str, fps: float):
+        from jcrowd.render import VIDEO_SUFFIXES, VideoWriter
+
+        self.path = Path(out)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.video = VideoWriter(out, fps) if self.path.suffix.lower() in VIDEO_SUFFIXES else None
+        if self.video is None:
+            self.path.mkdir(parents=True, exist_ok=True)
+        self.count = 0
+
+    def add(self, image: np.ndarray) -> None:
+        from jcrowd.render import write_png
+
+        if self.video is not None:
+            self.video.append(image)
+        else:
+            write_png(self.path / f"frame_{self.count:05d}.png", image)
+        self.count += 1
+
+    def close(self, ok: bool) -> None:
+        if self.video is not None:
+            self.video.close() if ok else self.video.abort()
+
+
+def _view(scenario: Any, t: float) -> Any:
+    from jcrowd.render import View
+    from jcrowd.scenario import camera_at
+
+    cam = scenario.camera
+    eye, target = camera_at(cam, t)
+    return View(tuple(eye), tuple(target), fov_deg=cam.fov_deg, near=cam.near, far=cam.far)
+
+
+def _colors(color_by: str, level: int, ids: np.ndarray, group_colors: np.ndarray) -> np.ndarray:
+    from jcrowd.render import LEVEL_COLORS
+
+    if color_by == "group":
+        return group_colors[np.minimum(ids, len(group_colors) - 1)]
+    return np.broadcast_to(np.asarray(LEVEL_COLORS[level], np.float32), (len(ids), 3))
+
+
+def render_scenario(
+    scenario: Any,
+    model: Any,
+    out: str,
+    size: tuple[int, int],
+    frames: int | None,
+    color_by: str,
+    still: str | None = None,
+) -> dict[str, Any]:
+    """Step and draw ``scenario``; write the clip (and optionally one PNG still)."""
+    import jax
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from jcrowd.render import CrowdRenderer, LevelInstances, write_png
+    from jcrowd.simulate import prepare
+    from jcrowd.synthesis import point_parents
+
+    sim, state = prepare(scenario, model)
+    fn = sim.compiled()
+    n_frames = sim.steps if frames is None else frames
+    parents = point_parents(model)
+    caps = sim.config.capacities
+    group_colors = np.asarray(sim.spawn.color, np.float32)
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn(state, sim.view_at(0.0), sim.dt))
+    compile_s = time.perf_counter() - t0
+    step_ms, draw_ms = [], []
+    sink = _Sink(out, scenario.fps)
+    ok = False
+    middle = None
+    try:
+        with (
+            CrowdRenderer([parents] * len(caps), *size, capacity=caps) as renderer,
+            Progress(console=Console(file=sys.stderr), transient=True) as bar,
+        ):
+            task = bar.add_task(f"rendering {n_frames} frames", total=n_frames)
+            for i in range(n_frames):
+                t = time.perf_counter()
+                state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
+                host = jax.device_get((frame.slots, frame.valid, frame.points))
+                step_ms.append(1e3 * (time.perf_counter() - t))
+                t = time.perf_counter()
+                levels = [
+                    LevelInstances(pts, valid, _colors(color_by, lv, slots, group_colors))
+                    for lv, (slots, valid, pts) in enumerate(zip(*host, strict=True))
+                ]
+                image = renderer.render(_view(scenario, i * sim.dt), levels)
+                draw_ms.append(1e3 * (time.perf_counter() - t))
+                sink.add(image)
+                if i == n_frames // 2:
+                    middle = image
+                bar.advance(task)
+            renderer_name = renderer.renderer_name
+        ok = True
+    finally:
+        sink.close(ok)
+    if still is not None and middle is not None:
+        write_png(still, middle)
+    return {
+        "frames": n_frames,
+        "agents": sim.num_agents,
+        "out": str(out),
+        "size": list(size),
+        "ms_per_frame_median": float(np.median(draw_ms)),
+        "ms_per_step_median": float(np.median(step_ms)),
+        "compile_s": compile_s,
+        "renderer": renderer_name,
+    }
+
+
+def render_recording(
+    path: str, out: str, size: tuple[int, int] | None, frames: int | None, color_by: str
+) -> dict[str, Any]:
+    """Draw the joints recorded by ``jcrowd run --record visible|all``."""
+    from jcrowd.errors import RenderError
+    from jcrowd.render import CrowdRenderer, LevelInstances, View
+
+    rec = np.load(path)
+    nlev = int(rec["levels"]) if "levels" in rec else 0
+    if "points_0" not in rec:
+        raise RenderError(
+            f"{path}: expected joints recorded with `jcrowd run --record visible` (or all), "
+            f"found only {sorted(rec.files)}"
+        )
+    parents = tuple(int(p) for p in rec["parents"])
+    steps = rec["points_0"].shape[0]
+    n_frames = steps if frames is None else min(frames, steps)
+    caps = [rec[f"points_{lv}"].shape[1] for lv in range(nlev)]
+    w, h = size or (1280, 720)
+    group_colors = np.asarray(rec["color"], np.float32)
+    fov, near, far = (float(v) for v in rec["lens"])
+    draw_ms = []
+    sink = _Sink(out, float(rec["fps"]))
+    ok = False
+    try:
+        with CrowdRenderer([parents] * nlev, w, h, capacity=caps) as renderer:
+            for i in range(n_frames):
+                t = time.perf_counter()
+                levels = [
+                    LevelInstances(
+                        rec[f"points_{lv}"][i],
+                        rec[f"valid_{lv}"][i],
+                        _colors(color_by, lv, rec[f"slots_{lv}"][i], group_colors),
+                    )
+                    for lv in range(nlev)
+                ]
+                view = View(
+                    tuple(rec["eye"][i]), tuple(rec["target"][i]), fov_deg=fov, near=near, far=far
+                )
+                sink.add(renderer.render(view, levels))
+                draw_ms.append(1e3 * (time.perf_counter() - t))
+            name = renderer.renderer_name
+        ok = True
+    finally:
+        sink.close(ok)
+    return {
+        "frames": n_frames,
+        "out": str(out),
+        "size": [w, h],
+        "ms_per_frame_median": float(np.median(draw_ms)),
+        "renderer": name,
+    }
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    from jcrowd.cli import emit
+    from jcrowd.cli.run import load_model
+    from jcrowd.scenario import load_scenario
+
+    if Path(args.source).suffix.lower() == ".npz":
+        size = parse_size(args.size, (1280, 720))
+        result = render_recording(args.source, args.out, size, args.frames, args.color_by)
+    else:
+        scenario = load_scenario(args.source)
+        model, _ = load_model(scenario, args.model)
+        size = parse_size(args.size, (scenario.camera.width, scenario.camera.height))
+        result = render_scenario(scenario, model, args.out, size, args.frames, args.color_by)
+    emit(result, args.json, _print)
+    return result
+
+
+def _print(result: dict[str, Any]) -> None:
+    sys.stdout.write(
+        f"{result['frames']} frames → {result['out']} ({result['size'][0]}×{result['size'][1]}, "
+        f"{result['ms_per_frame_median']:.0f} ms per frame drawn, {result['renderer']})\n"
+    )

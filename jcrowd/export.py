@@ -1,0 +1,70 @@
+"""One agent of a recorded run as a full-detail :class:`~jcrowd.motion.Motion` (for BVH export).
+
+A recording made with ``jcrowd run --record all`` holds, per step and agent, the root position
+and heading, the phase τ, the current and next clip's controls and whether a next clip was
+chosen. That is enough to re-synthesize the agent at level 0 whatever level it was drawn at:
+the pose vector at each step is the kriged clip at τ (000 Eqs. 4–5, 8), blended with the next
+clip over the second half of the cycle exactly as :mod:`jcrowd.crowd` blends near agents, and
+the root is put where the run put it. Every joint of the model's skeleton is written (joints a
+level drops keep their reference rotation), scaled to the agent's height.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import jax.numpy as jnp
+import numpy as np
+
+from jcrowd.errors import JcrowdError
+from jcrowd.kriging.universal import predict
+from jcrowd.model import MotionModel
+from jcrowd.motion import Motion
+from jcrowd.rotation import quat_from_expmap, quat_mul, quat_normalize, yaw_quat
+
+__all__ = ["RECORD_KEYS", "agent_motion"]
+
+RECORD_KEYS = ("position", "heading", "tau", "control", "control_next", "has_next", "height")
+
+
+def _pose_vectors(model: MotionModel, c: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """Scaled level-0 pose vectors ``(F, P)`` for per-frame controls ``(F, d)`` and phases."""
+    lv = model.levels[0]
+    cores = np.asarray(predict(lv.kriging, jnp.asarray(c, jnp.float32)), np.float64)
+    last = lv.u_time.shape[0] - 1
+    t = np.clip(tau, 0.0, last)
+    i0 = np.minimum(np.floor(t).astype(int), last - 1)
+    frac = (t - i0)[:, None]
+    w = lv.u_time[i0] * (1 - frac) + lv.u_time[i0 + 1] * frac  # 000 Eq. 5
+    g = np.einsum("frs,fs->fr", cores, w)
+    return (g @ lv.u_pose.T) * model.layout.scale
+
+
+def agent_motion(model: MotionModel, recording: Mapping[str, np.ndarray], agent: int) -> Motion:
+    """The recorded ``agent`` re-synthesized at full detail, at the run's frame rate."""
+    missing = [k for k in RECORD_KEYS if k not in recording]
+    if missing:
+        raise JcrowdError(f"export: expected a recording made with --record all, missing {missing}")
+    n = recording["position"].shape[1]
+    if not 0 <= agent < n:
+        raise JcrowdError(f"export: expected an agent id in 0..{n - 1}, found {agent}")
+    tau = np.asarray(recording["tau"][:, agent], np.float64)
+    y = _pose_vectors(model, recording["control"][:, agent], tau)
+    y_next = _pose_vectors(model, recording["control_next"][:, agent], tau)
+    half = (model.levels[0].u_time.shape[0] - 1) / 2
+    x = np.clip((tau - half) / half, 0.0, 1.0)
+    s = np.where(recording["has_next"][:, agent], x * x * (3 - 2 * x), 0.0)[:, None]
+    y = y + s * (y_next - y)
+    height = float(recording["height"][agent])
+    layout, j = model.layout, model.layout.num_joints
+    heading = np.asarray(recording["heading"][:, agent], np.float64)
+    root = quat_mul(yaw_quat(heading), quat_from_expmap(y[:, layout.tilt]))
+    e = y[:, 7 : 7 + 3 * (j - 1)].reshape(len(y), j - 1, 3)
+    joints = quat_mul(np.asarray(layout.reference, np.float64)[None, 1:], quat_from_expmap(e))
+    rot = quat_normalize(np.concatenate([root[:, None], joints], axis=1))
+    xz = np.asarray(recording["position"][:, agent], np.float64)
+    pos = np.stack([xz[:, 0], y[:, layout.height] * height, xz[:, 1]], axis=1)
+    fps = float(recording["fps"]) if "fps" in recording else 30.0
+    return Motion(
+        model.skeleton.scaled(height), rot.astype(np.float32), pos.astype(np.float32), fps
+    )

@@ -1,0 +1,187 @@
+"""The crowd commands end to end: run → render → export, demo, and their errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from jcrowd.cli import main
+from jcrowd.io.bvh import read_bvh
+
+ROOT = Path(__file__).resolve().parents[1]
+
+SMALL = """
+model = "default"
+seed = 5
+duration = 1.0
+fps = 30
+[ground]
+center = [0, 0]
+size = [60, 60]
+[camera]
+eye = [0, 6, -25]
+target = [0, 0, 0]
+fov = 50
+width = 320
+height = 180
+[[groups]]
+name = "a"
+count = 12
+spawn = { shape = "rect", center = [0, -5], size = [10, 6] }
+path = { waypoints = [[0, 10], [10, 10]], loop = false }
+"""
+
+
+def _json(capsys: pytest.CaptureFixture[str], argv: list[str]) -> tuple[int, dict]:
+    code = main(argv)
+    return code, json.loads(capsys.readouterr().out)
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
+    folder = tmp_path_factory.mktemp("run")
+    scene = folder / "small.toml"
+    scene.write_text(SMALL)
+    out = folder / "run.npz"
+    from contextlib import redirect_stdout
+    from io import StringIO
+
+    buf = StringIO()
+    with redirect_stdout(buf):
+        code = main(
+            ["run", str(scene), "--steps", "20", "--record", "all", "--out", str(out), "--json"]
+        )
+    assert code == 0
+    return out, json.loads(buf.getvalue())
+
+
+def test_run_json_keys_and_no_recompiles(recording: tuple[Path, dict]) -> None:
+    out, result = recording
+    for key in (
+        "agents",
+        "steps",
+        "ms_per_step_median",
+        "compile_s",
+        "level_histogram",
+        "recompiles",
+        "out",
+    ):
+        assert key in result
+    assert result["agents"] == 12 and result["steps"] == 20 and result["recompiles"] == 0
+    assert len(result["level_histogram"]) == 7  # 6 levels + culled
+    assert sum(result["level_histogram"]) == pytest.approx(12)
+    rec = np.load(out)
+    assert rec["position"].shape == (20, 12, 2)
+    assert rec["points_0"].shape[2:] == (len(rec["parents"]), 3)
+    assert np.all(np.isfinite(rec["position"]))
+
+
+def test_render_recording_to_png_frames(
+    recording: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out, _ = recording
+    code, result = _json(
+        capsys,
+        [
+            "render",
+            str(out),
+            "--out",
+            str(tmp_path / "frames"),
+            "--frames",
+            "3",
+            "--size",
+            "160x120",
+            "--json",
+        ],
+    )
+    assert code == 0 and result["frames"] == 3
+    pngs = sorted((tmp_path / "frames").glob("*.png"))
+    assert len(pngs) == 3
+    import imageio.v3 as iio
+
+    img = iio.imread(pngs[0])
+    assert img.shape == (120, 160, 3)
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) > 10  # not a blank frame
+
+
+def test_render_scenario_to_mp4_by_group(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene = tmp_path / "small.toml"
+    scene.write_text(SMALL)
+    code, result = _json(
+        capsys,
+        [
+            "render",
+            str(scene),
+            "--out",
+            str(tmp_path / "v" / "clip.mp4"),
+            "--frames",
+            "4",
+            "--color-by",
+            "group",
+            "--json",
+        ],
+    )
+    assert code == 0
+    assert result["frames"] == 4 and result["size"] == [320, 180]
+    assert (tmp_path / "v" / "clip.mp4").stat().st_size > 0
+    assert result["ms_per_frame_median"] > 0
+
+
+def test_export_agent_to_bvh_round_trips(
+    recording: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out, _ = recording
+    code, result = _json(
+        capsys, ["export", str(out), "--agent", "0", "7", "--out-dir", str(tmp_path), "--json"]
+    )
+    assert code == 0 and len(result["files"]) == 2
+    clip = read_bvh(result["files"][1])
+    rec = np.load(out)
+    assert clip.num_frames == 20
+    # The exported root follows the run's root path (x, z) to BVH precision (1e-6 m text).
+    np.testing.assert_allclose(
+        np.asarray(clip.root_positions)[:, [0, 2]], rec["position"][:, 7], atol=1e-4
+    )
+
+
+def test_export_needs_a_full_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scene = tmp_path / "small.toml"
+    scene.write_text(SMALL)
+    main(["run", str(scene), "--steps", "2", "--out", str(tmp_path / "r.npz"), "--json"])
+    capsys.readouterr()
+    code, result = _json(
+        capsys,
+        ["export", str(tmp_path / "r.npz"), "--agent", "0", "--out-dir", str(tmp_path), "--json"],
+    )
+    assert code == 2 and "--record all" in result["error"]["message"]
+
+
+def test_run_bad_scenario_names_file_and_key(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene = tmp_path / "bad.toml"
+    scene.write_text(SMALL.replace("count = 12", "count = -3"))
+    code, result = _json(capsys, ["run", str(scene), "--json"])
+    assert code == 2
+    assert "bad.toml" in result["error"]["message"]
+    assert "groups[0].count" in result["error"]["message"]
+
+
+def test_demo_writes_mp4_and_png(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, result = _json(
+        capsys,
+        ["demo", "--out-dir", str(tmp_path), "--seconds", "0.2", "--size", "320x180", "--json"],
+    )
+    assert code == 0
+    assert Path(result["mp4"]).stat().st_size > 0 and Path(result["png"]).stat().st_size > 0
+    assert result["agents"] == 3000 and result["frames"] == 6
+
+
+def test_shipped_demo_scenario_is_the_example() -> None:
+    shipped = (ROOT / "jcrowd" / "assets" / "plaza.toml").read_text()
+    assert shipped == (ROOT / "examples" / "plaza.toml").read_text()
