@@ -180,9 +180,18 @@ def init_state(
 
 
 @eqx.filter_jit
-def _first_clips(cm: CrowdModel, *args: Array) -> tuple[Array, Array, Array]:
-    *arrays, min_reliability = args
-    return jax.vmap(lambda o, c0, t, s, h: next_clip(cm, o, c0, t, s, h, min_reliability))(*arrays)
+def _first_clips(
+    cm: CrowdModel,
+    origin: Array,
+    control: Array,
+    target: Array,
+    speed: Array,
+    height: Array,
+    min_reliability: float,
+) -> tuple[Array, Array, Array]:
+    return jax.vmap(lambda o, c0, t, s, h: next_clip(cm, o, c0, t, s, h, min_reliability))(
+        origin, control, target, speed, height
+    )
 
 
 def _smoothstep(x: Array) -> Array:

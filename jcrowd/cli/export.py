@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from jcrowd.cli import emit
     from jcrowd.errors import JcrowdError
     from jcrowd.export import agent_motion
-    from jcrowd.io.bvh import write_bvh
+    from jcrowd.io.bvh_write import write_bvh
     from jcrowd.io.model_file import load_motion_model
 
     try:
@@ -55,5 +55,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         files.append(str(path))
         frames = motion.num_frames
     result = {"files": files, "frames": frames, "model": model_path}
-    emit(result, args.json, lambda r: sys.stdout.write("\n".join(r["files"]) + "\n"))
+    emit(result, args.json, _print)
     return result
+
+
+def _print(result: dict[str, Any]) -> None:
+    sys.stdout.write("\n".join(result["files"]) + "\n")
