@@ -131,7 +131,7 @@ def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
         return level_points(lv, pose_from_coeffs(lv, decode_coeffs(lv, a, tau)), xz, hd, h)
 
     f = jax.jit(jax.vmap(one))
-    args = (state.mix, state.tau, state.position, state.height, state.heading)
+    args = (state.clip()[1], state.tau, state.position, state.height, state.heading)
     args = tuple(x[:n] for x in args)
     jax.block_until_ready(f(*args))
     return n / (_median_ms(lambda: f(*args), repeats) * 1e-3)
@@ -144,7 +144,7 @@ def run_count(model: MotionModel, n: int, steps: int, bw: float) -> dict[str, An
     fn = sim.compiled()
     view, dt = sim.view_at(0.0), sim.dt
     t = time.perf_counter()
-    jax.block_until_ready(fn(state, view, dt))
+    jax.block_until_ready(fn(jax.tree.map(jnp.copy, state), view, dt))  # state is donated
     compile_s = time.perf_counter() - t
     for _ in range(3):  # warm-up: past the first clip choices
         state, frame = fn(state, view, dt)

@@ -52,8 +52,8 @@ class StepConfig:
         thresholds: distances (m) past which an agent is at least level i + 1.
         hysteresis: band (m) round each threshold inside which the level does not change.
         blend_max_level: levels ≤ this blend clips; coarser ones switch at the frame.
-        refresh: clips chosen per step at most (0: ``N / 16 + 64``, about twice the rate at
-            which 1 s cycles end at 30 steps per second).
+        refresh: clips chosen per step at most (0: ``N / 32 + 64``, above the rate at which
+            1.1 s cycles end at 30 steps per second, N / 33).
         reach: a waypoint within this distance (m) counts as reached.
         importance: ``"distance"`` (nearer first) or ``"pixels"`` (taller on screen first).
         min_reliability: below this ρ a clip's controls are pulled towards the nearest sample.
@@ -98,12 +98,12 @@ class CrowdState(eqx.Module):
     position: Float[Array, "N 2"]  # root (x, z), m
     heading: Float[Array, " N"]  # rad; faces (sin, 0, cos)
     tau: Float[Array, " N"]  # phase in aligned frames, [0, T − 1)
-    control: Float[Array, "N d"]  # current clip's controls
-    mix: Float[Array, "N A"]  # current clip's mixing vector [b(c); 1; ĉ]
-    duration: Float[Array, " N"]  # current clip's duration (model frames)
-    control_next: Float[Array, "N d"]
-    mix_next: Float[Array, "N A"]
-    duration_next: Float[Array, " N"]
+    # Two clip slots per agent, ``current`` naming the playing one; the next clip is written into
+    # the other, and the hand-over flips ``current`` (no copy of the mixing vectors).
+    control: Float[Array, "N 2 d"]  # clips' controls
+    mix: Float[Array, "N 2 A"]  # clips' mixing vectors [b(c); 1; ĉ]
+    duration: Float[Array, "N 2"]  # clips' durations (model frames)
+    current: Int[Array, " N"]  # 0 or 1
     has_next: Bool[Array, " N"]
     origin: Float[Array, "N 3"]  # (x, z, heading) at the current cycle's start
     level: Int[Array, " N"]  # last LOD level; L = culled
@@ -118,6 +118,12 @@ class CrowdState(eqx.Module):
     @property
     def num_agents(self) -> int:
         return int(self.position.shape[0])
+
+    def clip(self, which: str = "current") -> tuple[Array, Array, Array]:
+        """``(control (N, d), mix (N, A), duration (N,))`` of the current or the next clip."""
+        rows = jnp.arange(self.num_agents)
+        k = self.current if which == "current" else 1 - self.current
+        return self.control[rows, k], self.mix[rows, k], self.duration[rows, k]
 
 
 class Frame(eqx.Module):
@@ -160,12 +166,10 @@ def init_state(
         position=pos,
         heading=heading,
         tau=tau,
-        control=c,
-        mix=a,
-        duration=dur,
-        control_next=c,
-        mix_next=a,
-        duration_next=dur,
+        control=jnp.stack([c, c], axis=1),
+        mix=jnp.stack([a, a], axis=1),
+        duration=jnp.stack([dur, dur], axis=1),
+        current=jnp.zeros(n, jnp.int32),
         has_next=jnp.zeros(n, bool),
         origin=origin,
         level=jnp.zeros(n, jnp.int32),
@@ -204,10 +208,11 @@ def _agent_level(cm: CrowdModel, level: int, blend: bool, state: CrowdState, i: 
     lv = cm.decoders.levels[level]
     last = float(cm.frames - 1)
     tau = state.tau[i]
-    g = decode_coeffs(lv, state.mix[i], tau)
+    k = state.current[i]
+    g = decode_coeffs(lv, state.mix[i, k], tau)
     if blend:
         s = jnp.where(state.has_next[i], _smoothstep((tau - last / 2) / (last / 2)), 0.0)
-        g = g + s * (decode_coeffs(lv, state.mix_next[i], tau) - g)
+        g = g + s * (decode_coeffs(lv, state.mix[i, 1 - k], tau) - g)
     y = pose_from_coeffs(lv, g)
     h = state.height[i]
     pts = level_points(lv, y, state.position[i], state.heading[i], h)
@@ -221,14 +226,15 @@ def _dead_reckoning(cm: CrowdModel, state: CrowdState, dt: Array) -> tuple[Array
     """Root-only advance along the clip's arc at its mean rate (culled agents)."""
     ix, iz, iyaw = cm.index[:3]
     last = float(cm.frames - 1)
-    dtau = dt * cm.decoders.fps * last / jnp.maximum(state.duration, 1.0)
+    control, _, duration = state.clip()
+    dtau = dt * cm.decoders.fps * last / jnp.maximum(duration, 1.0)
     frac = dtau / last
-    turn = state.control[:, iyaw]
+    turn = control[:, iyaw]
     half = turn / 2
     # Constant speed and turn rate over the cycle end at (dx, dz) with heading + turn when the
     # local velocity is the chord rotated back by half the turn, lengthened by θ/2 / sin(θ/2).
     gain = jnp.where(jnp.abs(half) > 1e-4, half / jnp.sin(jnp.where(half == 0, 1.0, half)), 1.0)
-    chord = jnp.stack([state.control[:, ix], state.control[:, iz]], axis=1) * gain[:, None]
+    chord = jnp.stack([control[:, ix], control[:, iz]], axis=1) * gain[:, None]
     local = local_to_world(chord, -half)
     return dtau, turn * frac, local_to_world(local * frac[:, None], state.heading)
 
@@ -293,33 +299,37 @@ def _schedule(cm: CrowdModel, config: StepConfig, state: CrowdState) -> tuple[Cr
     alive = state.alive & ~(done & ~state.loop)
 
     need = alive & ~state.has_next & (state.tau >= last / 2)
-    (idx,) = jnp.nonzero(need, size=min(config.refresh or n // 16 + 64, n), fill_value=n)
+    (idx,) = jnp.nonzero(need, size=min(config.refresh or n // 32 + 64, n), fill_value=n)
     safe = jnp.where(idx < n, idx, 0)
     tgt = state.waypoints[safe, wp[safe]]
     c, a, dur = jax.vmap(
         lambda o, c0, t, s, h: next_clip(cm, o, c0, t, s, h, config.min_reliability)
-    )(state.origin[safe], state.control[safe], tgt, state.speed[safe], state.height[safe])
-    control_next = state.control_next.at[idx].set(c, mode="drop")
-    mix_next = state.mix_next.at[idx].set(a, mode="drop")
-    duration_next = state.duration_next.at[idx].set(dur, mode="drop")
+    )(
+        state.origin[safe],
+        state.control[safe, state.current[safe]],
+        tgt,
+        state.speed[safe],
+        state.height[safe],
+    )
+    slot = 1 - state.current[safe]
+    control = state.control.at[idx, slot].set(c, mode="drop")
+    mix = state.mix.at[idx, slot].set(a, mode="drop")
+    duration = state.duration.at[idx, slot].set(dur, mode="drop")
     has_next = state.has_next.at[idx].set(True, mode="drop")
     deferred = jnp.sum(need, dtype=jnp.int32) - jnp.sum(idx < n, dtype=jnp.int32)
 
     wrap = state.tau >= last
     take = wrap & has_next
-    sel = take[:, None]
     new_origin = jnp.concatenate([state.position, state.heading[:, None]], axis=1)
     return (
         CrowdState(
             position=state.position,
             heading=state.heading,
             tau=jnp.where(wrap, state.tau - last, state.tau),
-            control=jnp.where(sel, control_next, state.control),
-            mix=jnp.where(sel, mix_next, state.mix),
-            duration=jnp.where(take, duration_next, state.duration),
-            control_next=control_next,
-            mix_next=mix_next,
-            duration_next=duration_next,
+            control=control,
+            mix=mix,
+            duration=duration,
+            current=jnp.where(take, 1 - state.current, state.current),
             has_next=has_next & ~take,
             origin=jnp.where(wrap[:, None], new_origin, state.origin),
             level=state.level,

@@ -55,7 +55,7 @@ def _sim(model, count=24, **lod):
 
 
 def _run(sim, state, steps, fn=None):
-    fn = fn or sim.compiled()
+    fn = fn or sim.compiled(donate=False)
     frames = []
     for i in range(steps):
         state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
@@ -112,7 +112,7 @@ def test_frame_points_equal_direct_decode(model):
     assert ok.any()
     i = int(slots[ok][0])
     lv = sim.crowd.decoders.levels[0]
-    g = decode_coeffs(lv, state.mix[i], state.tau[i])  # has_next is False at t = 0
+    g = decode_coeffs(lv, state.clip()[1][i], state.tau[i])  # has_next is False at t = 0
     y = pose_from_coeffs(lv, g)
     want = level_points(lv, y, state.position[i], state.heading[i], state.height[i])
     got = np.asarray(frame.points[0])[np.nonzero(slots == i)[0][0]]
@@ -141,12 +141,12 @@ def test_clip_handover_is_continuous(model):
     prev_pts, prev_tau = None, None
     inside, boundary = [], []
     for i in range(120):
+        tau = np.asarray(state.tau)  # read before the step takes the state's buffers
         new, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
         ok = np.asarray(frame.valid[0])
         ids = np.asarray(frame.slots[0])[ok]
         pts = np.full((6, np.asarray(frame.points[0]).shape[1], 3), np.nan)
         pts[ids] = np.asarray(frame.points[0])[ok]
-        tau = np.asarray(state.tau)
         if prev_pts is not None:
             move = np.linalg.norm(pts - prev_pts, axis=2).max(axis=1)  # (agents,)
             wrapped = tau < prev_tau

@@ -98,6 +98,7 @@ def save_recording(path: str | Path, recording: dict[str, np.ndarray]) -> Path:
 def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, Any], dict]:
     """Run ``steps`` steps with a progress bar; return the JSON summary and the recording."""
     import jax
+    import jax.numpy as jnp
     from rich.console import Console
     from rich.progress import Progress
 
@@ -105,7 +106,8 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
     n = sim.num_agents
     nlev = len(sim.config.capacities)
     t0 = time.perf_counter()
-    jax.block_until_ready(step(state, sim.view_at(0.0), sim.dt))  # compile (+ one step, dropped)
+    warm = jax.tree.map(jnp.copy, state)  # the step donates its input state
+    jax.block_until_ready(step(warm, sim.view_at(0.0), sim.dt))  # compile (+ one step, dropped)
     compile_s = time.perf_counter() - t0
     rec: dict[str, list] = {
         k: [] for k in ("position", "heading", "level", "alive", "eye", "target")
@@ -123,37 +125,37 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
         task = bar.add_task(f"{n:,} agents", total=steps)
         for i in range(steps):
             view = sim.view_at(i * sim.dt)
+            snapshot: dict[str, Any] = {
+                "position": state.position,
+                "heading": state.heading,
+                "alive": state.alive,
+                "eye": view.eye,
+                "target": view.target,
+            }
+            if record == "all":
+                control, _, _ = state.clip("current")
+                control_next, _, _ = state.clip("next")
+                snapshot.update(
+                    tau=state.tau,
+                    control=control,
+                    control_next=control_next,
+                    has_next=state.has_next,
+                )
+            host = jax.device_get(snapshot)  # before the step takes the state's buffers
             t = time.perf_counter()
             new, frame = step(state, view, sim.dt)
             jax.block_until_ready(new)
             times.append(time.perf_counter() - t)
-            host = jax.device_get(
-                {
-                    "position": state.position,
-                    "heading": state.heading,
-                    "level": frame.level,
-                    "alive": state.alive,
-                    "eye": view.eye,
-                    "target": view.target,
-                    **(
-                        {
-                            k: getattr(state, k)
-                            for k in ("tau", "control", "control_next", "has_next")
-                        }
-                        if record == "all"
-                        else {}
-                    ),
-                    **(
-                        {
-                            f"{name}_{lv}": getattr(frame, name)[lv]
-                            for lv in range(nlev)
-                            for name in ("slots", "valid", "points")
-                        }
-                        if record != "roots"
-                        else {}
-                    ),
-                }
-            )
+            parts = {"level": frame.level}
+            if record != "roots":
+                parts.update(
+                    {
+                        f"{name}_{lv}": getattr(frame, name)[lv]
+                        for lv in range(nlev)
+                        for name in ("slots", "valid", "points")
+                    }
+                )
+            host.update(jax.device_get(parts))
             for key, value in host.items():
                 rec[key].append(value)
             hist += np.bincount(np.asarray(host["level"]), minlength=nlev + 1)
