@@ -119,8 +119,14 @@ def naive_ms(model: MotionModel, n: int, repeats: int) -> float:
     heading = jnp.asarray(rng.uniform(-3, 3, n), jnp.float32)
     f = _naive_kernel(model, samples, model.layout)
     b = jnp.asarray(b)
-    jax.block_until_ready(f(b, tau, xz, heading))
-    return _median_ms(lambda: f(b, tau, xz, heading), repeats)
+    # Chunks of 100k agents: the gathered sample rows of 1M agents at once would take 36 GB.
+    chunk = min(n, 100_000)
+    parts = [
+        (b[i : i + chunk], tau[i : i + chunk], xz[i : i + chunk], heading[i : i + chunk])
+        for i in range(0, n, chunk)
+    ]
+    jax.block_until_ready(f(*parts[0]))
+    return _median_ms(lambda: [jax.block_until_ready(f(*p)) for p in parts], repeats)
 
 
 def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
