@@ -30,7 +30,7 @@ from jcrowd.model import MotionModel
 from jcrowd.scenario import Scenario, camera_at
 from jcrowd.scenario_spawn import Spawn, spawn
 
-__all__ = ["Simulation", "prepare", "thresholds_for"]
+__all__ = ["Simulation", "prepare", "shard_state", "thresholds_for"]
 
 
 def thresholds_for(thresholds: tuple[float, ...], levels: int) -> tuple[float, ...]:
@@ -126,3 +126,37 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         jax.random.key(scenario.seed),
     )
     return Simulation(crowd, config, scenario, sp), state
+
+
+def shard_state(state: CrowdState) -> CrowdState:
+    """Place the state with its agent axis split over every device of every process.
+
+    One device: unchanged. Several (``XLA_FLAGS=--xla_force_host_platform_device_count=K`` on
+    CPU, several GPUs, or several processes after ``jax.distributed.initialize``): a one-axis
+    mesh ``agents`` over ``jax.devices()``; each process feeds its own contiguous block of agents
+    (``jax.make_array_from_process_local_data``). Every process builds the same initial state
+    (spawning is deterministic from the seed), so no data is sent at start.
+    """
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    devices = jax.devices()
+    if len(devices) == 1:
+        return state
+    n = state.num_agents
+    if n % len(devices):
+        raise ScenarioError(
+            f"sharding: expected an agent count divisible by the {len(devices)} devices, found {n}"
+        )
+    sharding = NamedSharding(Mesh(np.array(devices), ("agents",)), PartitionSpec("agents"))
+    procs, me = jax.process_count(), jax.process_index()
+    per = n // procs
+
+    def place(x: jax.Array) -> jax.Array:
+        host = np.asarray(x)
+        if procs == 1:
+            return jax.device_put(host, sharding)
+        return jax.make_array_from_process_local_data(
+            sharding, host[me * per : (me + 1) * per], host.shape
+        )
+
+    return jax.tree.map(place, state)

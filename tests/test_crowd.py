@@ -228,3 +228,59 @@ def test_sharded_over_four_devices_equals_one():
     # Same float32 program partitioned over devices: reductions may reorder, 1e-5 (issue 7).
     np.testing.assert_allclose(four["position"], one["position"], atol=1e-5)
     np.testing.assert_allclose(four["tau"], one["tau"], atol=1e-5)
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_two_processes_on_loopback_equal_one_process(tmp_path):
+    """`jcrowd run` as two processes (2 CPU devices each, one 4-device mesh over gloo) records
+    the same crowd as one process on one device."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE.format(count=32))
+    base = [sys.executable, "-m", "jcrowd.cli", "run", str(scene), "--steps", "5", "--json"]
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    single = subprocess.run(
+        [*base, "--out", str(tmp_path / "one.npz")],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+    )
+    assert json.loads(single.stdout)["recompiles"] == 0
+    env2 = dict(env, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    port = _free_port()
+    procs = [
+        subprocess.Popen(
+            [
+                *base,
+                "--out",
+                str(tmp_path / "two.npz"),
+                "--coordinator",
+                f"127.0.0.1:{port}",
+                "--num-processes",
+                "2",
+                "--process-id",
+                str(i),
+            ],
+            env=env2,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for i in range(2)
+    ]
+    outs = [p.communicate(timeout=300) for p in procs]
+    for p, (out, err) in zip(procs, outs, strict=True):
+        assert p.returncode == 0, err[-2000:]
+        assert json.loads(out)["agents"] == 32  # stdout holds exactly one JSON object
+    one, two = np.load(tmp_path / "one.npz"), np.load(tmp_path / "two.npz")
+    # Same float32 program over 4 devices in 2 processes: collectives may reorder sums, 1e-5.
+    np.testing.assert_allclose(two["position"], one["position"], atol=1e-5)
+    np.testing.assert_allclose(two["heading"], one["heading"], atol=1e-5)

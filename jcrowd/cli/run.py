@@ -13,6 +13,11 @@ Recording (``--out run.npz``, written atomically):
 - ``all``: also each agent's clip state (phase, controls of the current and next clip, whether
   a next clip is chosen) so ``jcrowd export`` can re-synthesize any agent at full detail.
 
+Several processes (``--coordinator HOST:PORT --num-processes N --process-id I``, one command
+per process): JAX's multi-process runtime (``jax.distributed``; gloo collectives on CPU) joins
+every process's devices into one mesh, the agent axis is split over it, each process feeds its
+own block of agents, and process 0 writes the recording. Each process prints its own JSON.
+
 Arrays are named ``position``, ``heading``, ``level``, ``alive``, ``slots_l``, ``valid_l``,
 ``points_l``, ``tau``, ``control``, ``control_next``, ``has_next`` plus ``height``, ``group``,
 ``color``, ``parents`` (bones to draw), ``eye``/``target`` per step and ``lens`` (fov, near,
@@ -23,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import os
 import sys
 import time
 from pathlib import Path
@@ -44,7 +50,25 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     g.add_argument("--seconds", type=float, help="scenario seconds to run")
     p.add_argument("--record", choices=("roots", "visible", "all"), default="roots")
     p.add_argument("--out", help="write the recording here (.npz)")
+    p.add_argument("--coordinator", help="HOST:PORT of process 0, for a run over several hosts")
+    p.add_argument("--num-processes", type=int, default=1)
+    p.add_argument("--process-id", type=int, default=0)
     return p
+
+
+def init_distributed(coordinator: str, processes: int, process_id: int) -> None:
+    """Join JAX's multi-process runtime (before any array exists); gloo collectives on CPU."""
+    import jax
+
+    from jcrowd.errors import JcrowdError
+
+    if not 0 <= process_id < processes:
+        raise JcrowdError(
+            f"--process-id: expected 0..{processes - 1} for --num-processes {processes}, "
+            f"found {process_id}"
+        )
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    jax.distributed.initialize(coordinator, processes, process_id)
 
 
 def load_model(scenario: Any, override: str | None) -> tuple[Any, str]:
@@ -59,13 +83,35 @@ def load_model(scenario: Any, override: str | None) -> tuple[Any, str]:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from jcrowd.cli import emit
+
+    if args.coordinator:
+        # Gloo logs its connections on the C-level stdout: fd 1 goes to stderr during the run,
+        # so stdout still carries one JSON object.
+        sys.stdout.flush()
+        saved = os.dup(1)
+        os.dup2(2, 1)
+        try:
+            init_distributed(args.coordinator, args.num_processes, args.process_id)
+            result = _run(args)
+        finally:
+            sys.stdout.flush()
+            os.dup2(saved, 1)
+            os.close(saved)
+    else:
+        result = _run(args)
+    emit(result, args.json, _print)
+    return result
+
+
+def _run(args: argparse.Namespace) -> dict[str, Any]:
     from jcrowd.errors import JcrowdError
     from jcrowd.scenario import load_scenario
-    from jcrowd.simulate import prepare
+    from jcrowd.simulate import prepare, shard_state
 
     scenario = load_scenario(args.scenario)
     model, model_path = load_model(scenario, args.model)
     sim, state = prepare(scenario, model)
+    state = shard_state(state)
     steps = sim.steps
     if args.steps is not None:
         steps = args.steps
@@ -80,9 +126,26 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
         recording["model"] = np.asarray(model_path)
         recording["parents"] = np.asarray(point_parents(model), np.int32)
-        result["out"] = str(save_recording(args.out, recording))
-    emit(result, args.json, _print)
+        if jax_process_index() == 0:  # one writer when several processes run one crowd
+            result["out"] = str(save_recording(args.out, recording))
     return result
+
+
+def jax_process_index() -> int:
+    import jax
+
+    return jax.process_index()
+
+
+def _fetch(tree: Any) -> Any:
+    """Host copies of (possibly multi-process) global arrays."""
+    import jax
+
+    if jax.process_count() == 1:
+        return jax.device_get(tree)
+    from jax.experimental import multihost_utils
+
+    return multihost_utils.process_allgather(tree, tiled=True)
 
 
 def save_recording(path: str | Path, recording: dict[str, np.ndarray]) -> Path:
@@ -141,12 +204,12 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
                     control_next=control_next,
                     has_next=state.has_next,
                 )
-            host = jax.device_get(snapshot)  # before the step takes the state's buffers
+            host = _fetch(snapshot)  # before the step takes the state's buffers
             t = time.perf_counter()
             new, frame = step(state, view, sim.dt)
             jax.block_until_ready(new)
             times.append(time.perf_counter() - t)
-            parts = {"level": frame.level}
+            parts = {"level": frame.level, "overflow": frame.overflow, "deferred": frame.deferred}
             if record != "roots":
                 parts.update(
                     {
@@ -155,12 +218,12 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
                         for name in ("slots", "valid", "points")
                     }
                 )
-            host.update(jax.device_get(parts))
+            host.update(_fetch(parts))
+            overflow += int(host.pop("overflow"))
+            deferred += int(host.pop("deferred"))
             for key, value in host.items():
                 rec[key].append(value)
             hist += np.bincount(np.asarray(host["level"]), minlength=nlev + 1)
-            overflow += int(frame.overflow)
-            deferred += int(frame.deferred)
             state = new
             bar.advance(task)
     recompiles = step._cache_size() - 1
@@ -183,7 +246,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
         "recompiles": int(recompiles),
         "overflow_per_step": overflow / steps,
         "deferred_clips": deferred,
-        "alive_end": int(np.sum(np.asarray(state.alive))),
+        "alive_end": int(np.sum(_fetch(state.alive))),
     }
     return result, recording
 
