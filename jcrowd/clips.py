@@ -26,6 +26,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from jcrowd.errors import KrigingError
+from jcrowd.gait import find_feet
 from jcrowd.kriging.universal import reliability_one
 from jcrowd.model import MotionModel
 from jcrowd.synthesis import Decoders, build_decoders, clip_weights
@@ -44,6 +45,7 @@ class CrowdModel(eqx.Module):
             mixing vector (Σ ΔA over the aligned frames, 001 §3.5).
         cycle_seconds: the samples' median cycle duration (s).
         index: static positions of ``dx, dz, dyaw, speed, height`` in the controls (-1: absent).
+        feet: left ankle, left toe, right ankle, right toe joints (for foot locking).
     """
 
     decoders: Decoders
@@ -53,6 +55,7 @@ class CrowdModel(eqx.Module):
     duration: Float[Array, " A"]
     cycle_seconds: float = eqx.field(static=True)
     index: tuple[int, int, int, int, int] = eqx.field(static=True)
+    feet: tuple[int, int, int, int] = eqx.field(static=True)
 
     @property
     def frames(self) -> int:
@@ -83,6 +86,7 @@ def build_crowd_model(model: MotionModel) -> CrowdModel:
     per_sample = duration[:s] + duration[s] + basis @ duration[s + 1 :]
     cycle_seconds = float(np.median(per_sample) / model.fps)
     ranges = np.asarray(model.control_ranges, np.float32)
+    feet = find_feet(model.skeleton)
     return CrowdModel(
         dec,
         jnp.asarray(ranges[:, 0]),
@@ -91,6 +95,7 @@ def build_crowd_model(model: MotionModel) -> CrowdModel:
         jnp.asarray(duration, jnp.float32),
         cycle_seconds,
         index,  # type: ignore[arg-type]
+        (feet.left_ankle, feet.left_toe, feet.right_ankle, feet.right_toe),
     )
 
 

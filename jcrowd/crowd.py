@@ -57,6 +57,8 @@ class StepConfig:
         reach: a waypoint within this distance (m) counts as reached.
         importance: ``"distance"`` (nearer first) or ``"pixels"`` (taller on screen first).
         min_reliability: below this ρ a clip's controls are pulled towards the nearest sample.
+        foot_lock: near levels (≤ ``blend_max_level``) move the root so the stance foot (the
+            lowest foot joint) does not slide; the decoded root velocity is used otherwise.
     """
 
     capacities: tuple[int, ...]
@@ -67,6 +69,7 @@ class StepConfig:
     reach: float = 2.0
     importance: str = "distance"
     min_reliability: float = 0.5
+    foot_lock: bool = True
 
     def check(self, levels: int) -> None:
         """Raise :class:`JcrowdError` unless the settings fit a model with ``levels`` levels."""
@@ -203,23 +206,40 @@ def _smoothstep(x: Array) -> Array:
     return x * x * (3.0 - 2.0 * x)
 
 
-def _agent_level(cm: CrowdModel, level: int, blend: bool, state: CrowdState, i: Array, dt: Array):
-    """Pose and root motion of agent ``i`` at ``level`` (one agent; batched by ``vmap``)."""
+def _agent_level(
+    cm: CrowdModel, level: int, near: bool, lock: bool, state: CrowdState, i: Array, dt: Array
+):
+    """Pose and root motion of agent ``i`` at ``level`` (one agent; batched by ``vmap``).
+
+    ``near``: blend into the next clip over the cycle's second half. ``lock``: move the root so
+    that the stance foot stays put (see :func:`step`).
+    """
     lv = cm.decoders.levels[level]
     last = float(cm.frames - 1)
-    tau = state.tau[i]
     k = state.current[i]
-    g = decode_coeffs(lv, state.mix[i, k], tau)
-    if blend:
-        s = jnp.where(state.has_next[i], _smoothstep((tau - last / 2) / (last / 2)), 0.0)
-        g = g + s * (decode_coeffs(lv, state.mix[i, 1 - k], tau) - g)
-    y = pose_from_coeffs(lv, g)
-    h = state.height[i]
-    pts = level_points(lv, y, state.position[i], state.heading[i], h)
+
+    def pose(tau: Array) -> Array:
+        g = decode_coeffs(lv, state.mix[i, k], tau)
+        if near:
+            s = jnp.where(state.has_next[i], _smoothstep((tau - last / 2) / (last / 2)), 0.0)
+            g = g + s * (decode_coeffs(lv, state.mix[i, 1 - k], tau) - g)
+        return pose_from_coeffs(lv, g)
+
+    tau, h, heading = state.tau[i], state.height[i], state.heading[i]
+    y = pose(tau)
+    pts = level_points(lv, y, state.position[i], heading, h)
     rates = root_rates(y)
     dtau = dt * cm.decoders.fps / rates.delta_a
-    dpos = local_to_world(rates.velocity * h * dtau, state.heading[i])
-    return pts, dtau, rates.yaw_rate * dtau, dpos
+    dyaw = rates.yaw_rate * dtau
+    dpos = local_to_world(rates.velocity * h * dtau, heading)
+    if lock:
+        # Root from the stance foot: the lowest foot joint now is where the foot is planted;
+        # place the root so that, after the step's pose and turn, that joint has not moved.
+        feet = jnp.asarray(cm.feet)
+        j = feet[jnp.argmin(pts[feet, 1])]
+        after = level_points(lv, pose(tau + dtau), state.position[i], heading + dyaw, h)
+        dpos = pts[j, jnp.array([0, 2])] - after[j, jnp.array([0, 2])]
+    return pts, dtau, dyaw, dpos
 
 
 def _dead_reckoning(cm: CrowdModel, state: CrowdState, dt: Array) -> tuple[Array, Array, Array]:
@@ -261,10 +281,11 @@ def step(
     points = []
     for lv, (slots, ok) in enumerate(zip(buckets.slots, buckets.valid, strict=True)):
         safe = jnp.where(ok, slots, 0)
-        blend = lv <= config.blend_max_level
+        near = lv <= config.blend_max_level
+        lock = near and config.foot_lock
 
-        def one(i, lv=lv, blend=blend):
-            return _agent_level(cm, lv, blend, state, i, dt)
+        def one(i, lv=lv, near=near, lock=lock):
+            return _agent_level(cm, lv, near, lock, state, i, dt)
 
         pts, t_l, yaw_l, pos_l = jax.vmap(one)(safe)
         points.append(pts)

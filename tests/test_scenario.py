@@ -106,7 +106,7 @@ def test_example_details_the_readme_promises():
     assert stadium.lod.capacities == (300, 400, 500, 600, 800, 2000)
     assert {g.spawn.kind for g in stadium.groups} == {"rect", "polygon"}
     plaza = load_scenario(EXAMPLES / "plaza.toml")
-    assert plaza.duration_s == 20.0 and plaza.camera.keys[0].eye[1] == 1.7
+    assert plaza.duration_s == 20.0 and plaza.camera.keys[0].eye[1] == 10.0
     assert plaza.lod.thresholds_m == DEFAULT_THRESHOLDS_M and plaza.lod.screen == "distance"
     assert load_scenario(EXAMPLES / "city_100k.toml").lod.screen == "pixels"
 
