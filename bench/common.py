@@ -54,3 +54,15 @@ def append_result(name: str, details: str, body: str) -> None:
     with RESULTS.open("a") as f:
         f.write(f"\n{head}\n\n{body.rstrip()}\n")
     print(f"appended to {RESULTS}", file=sys.stderr)
+
+
+def report(name: str, details: str, out: dict, text: str, as_json: bool, record: bool) -> None:
+    """Print ``out`` as one JSON object (``--json``) or ``text``; append ``text`` to RESULTS.md."""
+    import json
+
+    if as_json:
+        sys.stdout.write(json.dumps(out, indent=2) + "\n")
+    else:
+        print(text)
+    if record:
+        append_result(name, details, text)

@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
-import json
 import os
 import sys
 import time
@@ -35,7 +34,7 @@ import numpy as np
 from pykrige.ok import OrdinaryKriging
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import append_result, data_root, machine
+from common import data_root, machine, report
 
 from jcrowd.cli import main as jcrowd_main
 from jcrowd.data import load_dataset
@@ -128,12 +127,9 @@ def main() -> None:
         "jax": jax.__version__,
     }
     text = _table(out)
-    if args.json:
-        sys.stdout.write(json.dumps(out, indent=2) + "\n")
-    else:
-        print(text)
-    if not args.no_record:
-        append_result("kriging", f"{out['machine']}, jax {out['jax']}", text)
+    report(
+        "kriging", f"{out['machine']}, jax {out['jax']}", out, text, args.json, not args.no_record
+    )
 
 
 def _table(out: dict[str, Any]) -> str:

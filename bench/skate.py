@@ -12,13 +12,11 @@ planted foot per frame, cm) with :func:`jcrowd.evaluate.foot_skate`; the same me
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from pathlib import Path
 
 import jax
 import numpy as np
-from common import ROOT, append_result, data_root, machine
+from common import ROOT, data_root, machine, report
 
 from jcrowd import load_default_model
 from jcrowd.cli.run import simulate
@@ -56,12 +54,7 @@ def main() -> None:
         f"throughout skate {out['skate_level0_cm']:.2f} cm/frame; cmu16 captures "
         f"{out['skate_captures_cm']:.2f} cm/frame → {out['ratio']:.2f}×"
     )
-    if args.json:
-        sys.stdout.write(json.dumps(out, indent=2) + "\n")
-    else:
-        print(text)
-    if not args.no_record:
-        append_result("skate", f"{out['machine']}, jax {out['jax']}", text)
+    report("skate", f"{out['machine']}, jax {out['jax']}", out, text, args.json, not args.no_record)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,6 @@ In the same run, on the same agents:
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from typing import Any
@@ -29,7 +28,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-from common import append_result, machine
+from common import machine, report
 
 from jcrowd import load_default_model
 from jcrowd.model import MotionModel
@@ -213,12 +212,14 @@ def main() -> None:
         "jax": jax.__version__,
     }
     text = _table(out)
-    if args.json:
-        sys.stdout.write(json.dumps(out, indent=2) + "\n")
-    else:
-        print(text)
-    if not args.no_record:
-        append_result("step", f"{out['machine']}, jax {out['jax']}, {out['device']}", text)
+    report(
+        "step",
+        f"{out['machine']}, jax {out['jax']}, {out['device']}",
+        out,
+        text,
+        args.json,
+        not args.no_record,
+    )
 
 
 def _table(out: dict[str, Any]) -> str:
