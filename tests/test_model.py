@@ -83,3 +83,5 @@ def test_kriging_beats_rbf_and_nearest_on_the_walker() -> None:
     # Measured: kriging 0.60 / 3.1 cm, RBF 0.76 / 5.0 cm, nearest 2.2 / 25 cm (joint / root).
     assert cv["kriging"]["joint_m"] < cv["rbf"]["joint_m"] < cv["nearest"]["joint_m"]
     assert cv["kriging"]["root_m"] < cv["rbf"]["root_m"] < cv["nearest"]["root_m"]
+    # Paper 001's per-pose kriging of whole motions beats the nearest sample too.
+    assert cv["per_pose"]["joint_m"] < cv["nearest"]["joint_m"]
