@@ -116,9 +116,7 @@ def choose_controls(
 ) -> Float[Array, " d"]:
     """Controls of a cycle starting at ``(position, heading)`` that walks towards ``target``."""
     ix, iz, iyaw, ispeed, iheight = cm.index
-    v = target - position
-    fwd = v[0] * jnp.sin(heading) + v[1] * jnp.cos(heading)
-    left = v[0] * jnp.cos(heading) - v[1] * jnp.sin(heading)
+    left, fwd = local_to_world(target - position, -heading)  # the target in the heading frame
     turn = jnp.clip(jnp.arctan2(left, fwd), cm.lo[iyaw], cm.hi[iyaw])
     stride = speed * cm.cycle_seconds
     c = (cm.lo + cm.hi) / 2

@@ -336,6 +336,8 @@ target = [0, 1, 0]"""
 INSIDE = r"expected a point inside the ground \(x in \[-100, 100\], z in \[-100, 100\]\)"
 
 # (what is wrong, text replaced in MINIMAL, its replacement, message after "file: ")
+# One bad-scenario case per line reads as a table, hence `# fmt: skip` below (a formatter
+# directive, not a skipped test).
 BAD = [
     ("unknown top-level key", "seed = 7", "seed = 7\ncolour = 1",
      r"colour: unknown key; allowed keys: model, seed, duration"),
