@@ -56,6 +56,7 @@ from jcrowd.skeleton import Skeleton
 
 __all__ = [
     "PoseLayout",
+    "decode_clip",
     "decode_pose_vectors",
     "encode_sample",
     "mean_rotations",
@@ -215,3 +216,18 @@ def unwarp(motion: Motion, times: np.ndarray) -> Motion:
     )
     rot, pos = sample_at(motion, aligned)
     return Motion(motion.skeleton, rot.astype(np.float32), pos.astype(np.float32), motion.fps)
+
+
+def decode_clip(
+    y: np.ndarray, layout: PoseLayout, skeleton: Skeleton, height: float, fps: float
+) -> Motion:
+    """Scaled aligned pose vectors ``(T, P)`` of a *predicted* cycle → a clip on the model clock.
+
+    Predicted time steps ΔA are floored at 1e-3 (a kriged or truncated ΔA can dip to 0 or
+    below, which would stop or reverse time), then :func:`decode_pose_vectors` and
+    :func:`unwarp`.
+    """
+    y = np.array(y, np.float64)
+    y[:, layout.delta_a] = np.maximum(y[:, layout.delta_a], 1e-3)
+    motion, times = decode_pose_vectors(y, layout, skeleton, height, fps)
+    return unwarp(motion, times)

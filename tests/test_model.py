@@ -9,7 +9,16 @@ import pytest
 
 from jcrowd.data import load_dataset
 from jcrowd.errors import KrigingError
-from jcrowd.model import MotionModel, fit_motion_model, level_pose_vectors, synthesize_clip
+from jcrowd.evaluate import evaluate_captures, foot_skate
+from jcrowd.kriging import predict
+from jcrowd.model import (
+    MotionModel,
+    clamp_controls,
+    fit_motion_model,
+    level_cores,
+    level_pose_vectors,
+    synthesize_clip,
+)
 from jcrowd.tensor_model import TensorModel, build_tensor_model, reconstruct_level
 
 
@@ -66,6 +75,59 @@ def test_bad_input(fitted: tuple[TensorModel, MotionModel]) -> None:
         fit_motion_model(tensor, ("dx", "wobble"))
 
 
+def test_clamp_controls_keeps_inside_and_projects_outside() -> None:
+    ranges = np.array([[-1.0, 1.0], [0.5, 2.0]])
+    inside = np.array([[0.3, 1.0], [-1.0, 2.0]])
+    np.testing.assert_array_equal(clamp_controls(inside, ranges), inside)
+    got = clamp_controls(np.array([[5.0, -3.0], [-9.0, 1.5]]), ranges)
+    np.testing.assert_array_equal(got, [[1.0, 0.5], [-1.0, 1.5]])
+
+
+def test_queries_outside_the_range_are_clamped(fitted: tuple[TensorModel, MotionModel]) -> None:
+    _, model = fitted
+    lo, hi = model.control_ranges[:, 0], model.control_ranges[:, 1]
+    far = hi + 10 * (hi - lo)  # far outside: the linear trend alone would be huge here
+    got = level_pose_vectors(model, far, 0)
+    np.testing.assert_array_equal(got, level_pose_vectors(model, hi, 0))
+    # Unclamped, the hyperplane trend extrapolates: the same query without the clamp differs.
+    raw = np.asarray(predict(model.levels[0].kriging, far.astype(np.float32)))
+    assert np.abs(raw - level_cores(model, hi, 0)).max() > 1.0
+
+
+def test_baselines_reproduce_the_samples(fitted: tuple[TensorModel, MotionModel]) -> None:
+    """RBF and nearest refitted from the model's own samples are exact at those samples."""
+    tensor, model = fitted
+    c = tensor.controls[:6, :3]
+    kriged = level_cores(model, c, 0, "kriging")
+    scale = np.abs(kriged).max()
+    for method in ("rbf", "nearest"):
+        # Both interpolate exactly; 1e-4 of the cores' scale is float32 round-off of the
+        # trend + residual reconstruction and of the RBF solve.
+        np.testing.assert_allclose(level_cores(model, c, 0, method), kriged, atol=1e-4 * scale)
+    # Between samples the three differ (a test that could not fail otherwise).
+    mid = (c[:1] + c[1:2]) / 2
+    assert np.abs(level_cores(model, mid, 0, "nearest") - level_cores(model, mid, 0)).max() > 1e-3
+    with pytest.raises(KrigingError, match="method: expected one of"):
+        level_cores(model, c, 0, "spline")
+
+
+def test_foot_lock_in_synthesize_and_eval(
+    fitted: tuple[TensorModel, MotionModel], cmu16_dir: Path
+) -> None:
+    tensor, model = fitted
+    c = tensor.controls[0, :3].tolist()
+    raw = synthesize_clip(model, c, 0)
+    locked = synthesize_clip(model, c, 0, lock_feet=True)
+    # Locking pins planted feet: the slide drops well below the raw decode's (0.5 cm/frame).
+    assert foot_skate(locked) < 0.5 * foot_skate(raw)
+    clips = load_dataset(cmu16_dir)[:1]
+    for method in ("kriging", "nearest"):
+        cycles = evaluate_captures(model, clips, method=method)
+        assert cycles and all(c["skate_pred_cm"] <= c["skate_raw_cm"] for c in cycles)
+        unlocked = evaluate_captures(model, clips, method=method, foot_lock=False)
+        assert [c["skate_pred_cm"] for c in unlocked] == [c["skate_raw_cm"] for c in unlocked]
+
+
 def test_kriging_beats_rbf_and_nearest_on_the_walker() -> None:
     """Ground truth from the procedural walker: a 4×5 grid of speeds and turns, 2 cycles each."""
     from jcrowd.data import Clip
@@ -79,9 +141,15 @@ def test_kriging_beats_rbf_and_nearest_on_the_walker() -> None:
         motion, _ = procedural_walk(cycles=2, speed=speed, dyaw_per_cycle=dyaw, seed=i)
         clips.append(Clip(f"walker_{i}", motion, 0, None, None, None))
     tensor = build_tensor_model(clips, TensorModelConfig(key_levels=2, mirror=False))
-    cv = leave_one_clip_out(tensor)  # every held-out clip's controls are new to the fit
+    cv = leave_one_clip_out(tensor, skate=True)  # every held-out clip's controls are new
     # Measured: kriging 0.60 / 3.1 cm, RBF 0.76 / 5.0 cm, nearest 2.2 / 25 cm (joint / root).
     assert cv["kriging"]["joint_m"] < cv["rbf"]["joint_m"] < cv["nearest"]["joint_m"]
     assert cv["kriging"]["root_m"] < cv["rbf"]["root_m"] < cv["nearest"]["root_m"]
     # Paper 001's per-pose kriging of whole motions beats the nearest sample too.
     assert cv["per_pose"]["joint_m"] < cv["nearest"]["joint_m"]
+    for method in ("kriging", "per_pose", "rbf", "nearest"):
+        r = cv[method]
+        assert r["joint_m"] < r["max_joint_m"]
+        # Locking can only pin planted feet; 1e-6 cm allows for the float32 decode.
+        assert 0.0 <= r["skate_cm"] <= r["skate_raw_cm"] + 1e-6
+    assert cv["captures"]["skate_cm"] > 0.0
