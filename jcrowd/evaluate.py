@@ -92,7 +92,7 @@ def leave_one_clip_out(
             fit_kriging(c_norm, motions[:, :, k], normalise=False).variogram
             for k in range(motions.shape[2])
         ]
-    errors: dict[str, list[tuple[float, float]]] = {m: [] for m in methods}
+    errors: dict[str, list[tuple[float, ...]]] = {m: [] for m in methods}
     for group in np.unique(tensor.groups):
         out = tensor.groups == group
         train = ~out

@@ -43,6 +43,7 @@ _LOD = {  # TOML key → LodSettings field
     "capacities": "capacities",
     "blend_max_level": "blend_max_level",
     "importance": "screen",
+    "min_pixels": "min_pixels",
 }
 
 

@@ -108,6 +108,7 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         hysteresis=lod.hysteresis_m,
         blend_max_level=lod.blend_max_level,
         importance=lod.screen,
+        min_pixels=lod.min_pixels,
     )
     config.check(levels)
     sp = spawn(scenario)

@@ -284,3 +284,40 @@ def test_two_processes_on_loopback_equal_one_process(tmp_path):
     # Same float32 program over 4 devices in 2 processes: collectives may reorder sums, 1e-5.
     np.testing.assert_allclose(two["position"], one["position"], atol=1e-5)
     np.testing.assert_allclose(two["heading"], one["heading"], atol=1e-5)
+
+
+def test_detail_culling_turns_tiny_agents_into_walking_dots(model):
+    """Agents shorter on screen than ``min_pixels`` are dots: not synthesized, still walking,
+    counted; with ``min_pixels = 0`` the same agents are synthesized."""
+    # A 1.7 m agent 20–60 m from the camera is ~18–53 px tall at 720p with a 60° fov: a
+    # 100 px threshold makes every agent in view a dot, 0 none.
+    sim, state = _sim(model, count=12, min_pixels=100.0)
+    fn = sim.compiled(donate=False)
+    view = sim.view_at(0.0)
+    new, frame = fn(state, view, sim.dt)
+    nlev = len(sim.config.capacities)
+    dots = np.asarray(frame.dots)
+    assert dots.sum() >= 6 and (np.asarray(frame.level) == nlev).all()  # some are out of view
+    assert not any(np.asarray(v).any() for v in frame.valid)
+    moved = np.linalg.norm(np.asarray(new.position) - np.asarray(state.position), axis=1)
+    assert (moved > 0.01).all()  # ~1.3 m/s × 1/30 s ≈ 4 cm by dead reckoning
+    sim0 = replace(sim, config=replace(sim.config, min_pixels=0.0))
+    _, frame0 = sim0.compiled(donate=False)(state, view, sim.dt)
+    assert not np.asarray(frame0.dots).any()
+    synthesized = np.zeros(12, bool)
+    for slots, ok in zip(frame0.slots, frame0.valid, strict=True):
+        synthesized[np.asarray(slots)[np.asarray(ok)]] = True
+    np.testing.assert_array_equal(synthesized, dots)  # exactly the agents in view
+
+
+def test_agents_beyond_the_budget_become_dots_and_count_as_overflow(model):
+    sim, state = _sim(model, count=24, capacities=(1, 1, 1, 1, 1, 1), min_pixels=0.0)
+    view = sim.view_at(0.0)
+    _, frame = sim.compiled(donate=False)(state, view, sim.dt)
+    placed = sum(int(np.asarray(v).sum()) for v in frame.valid)
+    dots = int(np.asarray(frame.dots).sum())
+    roomy = replace(sim, config=replace(sim.config, capacities=(24,) * 6))
+    _, all_in = roomy.compiled(donate=False)(state, view, sim.dt)
+    visible = sum(int(np.asarray(v).sum()) for v in all_in.valid)
+    assert placed == 6 and visible > 6  # one per level; the rest of those in view are dots
+    assert dots == visible - placed and int(frame.overflow) >= dots

@@ -92,6 +92,18 @@ def _colors(color_by: str, level: int, ids: np.ndarray, group_colors: np.ndarray
     return np.broadcast_to(np.asarray(LEVEL_COLORS[level], np.float32), (len(ids), 3))
 
 
+DOT_PARENTS = (-1, 0)
+"""A dot agent (below ``lod.min_pixels`` on screen) is drawn as one bone, ground to head."""
+
+
+def _dot_sticks(xz: np.ndarray, heights: np.ndarray) -> np.ndarray:
+    """``(N, 2, 3)``: each agent's root on the ground and the top of its head."""
+    ground = np.stack([xz[:, 0], np.zeros(len(xz), np.float32), xz[:, 1]], axis=1)
+    head = ground.copy()
+    head[:, 1] = heights
+    return np.stack([ground, head], axis=1)
+
+
 def render_scenario(
     scenario: Any,
     model: Any,
@@ -116,6 +128,8 @@ def render_scenario(
     parents = point_parents(model)
     caps = sim.config.capacities
     group_colors = np.asarray(sim.spawn.color, np.float32)
+    n = sim.num_agents
+    heights = np.asarray(sim.spawn.height, np.float32)
     t0 = time.perf_counter()
     warm = jax.tree.map(jax.numpy.copy, state)  # the step donates its input state
     jax.block_until_ready(fn(warm, sim.view_at(0.0), sim.dt))
@@ -126,20 +140,32 @@ def render_scenario(
     middle = None
     try:
         with (
-            CrowdRenderer([parents] * len(caps), *size, capacity=caps) as renderer,
+            CrowdRenderer(
+                [parents] * len(caps) + [DOT_PARENTS], *size, capacity=(*caps, n)
+            ) as renderer,
             Progress(console=Console(file=sys.stderr), transient=True) as bar,
         ):
             task = bar.add_task(f"rendering {n_frames} frames", total=n_frames)
             for i in range(n_frames):
                 t = time.perf_counter()
+                xz = np.asarray(state.position)  # the frame is the step's start; state is donated
                 state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
                 host = jax.device_get((frame.slots, frame.valid, frame.points))
+                dots = np.asarray(frame.dots)
                 step_ms.append(1e3 * (time.perf_counter() - t))
                 t = time.perf_counter()
                 levels = [
                     LevelInstances(pts, valid, _colors(color_by, lv, slots, group_colors))
                     for lv, (slots, valid, pts) in enumerate(zip(*host, strict=True))
                 ]
+                ids = np.arange(n)
+                levels.append(
+                    LevelInstances(
+                        _dot_sticks(xz, heights),
+                        dots,
+                        _colors(color_by, len(caps), ids, group_colors),
+                    )
+                )
                 image = renderer.render(_view(scenario, i * sim.dt), levels)
                 draw_ms.append(1e3 * (time.perf_counter() - t))
                 sink.add(image)
