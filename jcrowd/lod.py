@@ -126,9 +126,50 @@ def assign_buckets(
 
     Level ``l`` takes the ``C_l`` most important agents not yet placed whose ``min_level`` is
     at most ``l``. That equals the greedy rule "in order of importance, each agent takes the
-    first level at least as coarse as it may be that still has room". A level whose capacity
-    covers every agent is filled by compaction (no ranking).
+    first level at least as coarse as it may be that still has room". When every level's
+    candidates fit (the usual frame) the result is simply each agent at its ``min_level``, in
+    agent order, and a cheaper branch computes it (:func:`_unconstrained`); otherwise the greedy
+    fill ranks by importance (:func:`_greedy`). One branch runs (a scalar predicate).
     """
+    nlev = len(capacities)
+    want = jnp.where(eligible, min_level, nlev)
+    counts = jnp.sum(want[:, None] == jnp.arange(nlev)[None, :], axis=0)
+    fits = jnp.all(counts <= jnp.asarray(capacities))
+    return jax.lax.cond(
+        fits,
+        lambda: _unconstrained(want, capacities),
+        lambda: _greedy(min_level, importance, eligible, capacities),
+    )
+
+
+def _unconstrained(want: Int[Array, " N"], capacities: tuple[int, ...]) -> Buckets:
+    """Every eligible agent at its ``want`` level (``L``: none), when no level overflows.
+
+    Then at most ``Σ C_l`` agents are eligible: one pass over all agents compacts them, and the
+    levels are split from that short list (a pass over N per level would cost L times more).
+    """
+    n, nlev = want.shape[0], len(capacities)
+    short = min(n, sum(capacities))
+    (placed,) = jnp.nonzero(want < nlev, size=short, fill_value=n)
+    placed_level = jnp.where(placed < n, want[jnp.minimum(placed, n - 1)], nlev)
+    slots, valid = [], []
+    for lv, cap in enumerate(capacities):
+        (k,) = jnp.nonzero(placed_level == lv, size=min(cap, short), fill_value=short)
+        idx = jnp.where(k < short, placed[jnp.minimum(k, short - 1)], n).astype(jnp.int32)
+        idx = jnp.pad(idx, (0, cap - idx.shape[0]), constant_values=n)
+        slots.append(idx)
+        valid.append(idx < n)
+    zero = jnp.zeros((), jnp.int32)
+    return Buckets(tuple(slots), tuple(valid), want.astype(jnp.int32), zero, zero)
+
+
+def _greedy(
+    min_level: Int[Array, " N"],
+    importance: Float[Array, " N"],
+    eligible: Bool[Array, " N"],
+    capacities: tuple[int, ...],
+) -> Buckets:
+    """The greedy fill of :func:`assign_buckets`, ranking a level only when it overflows."""
     n = min_level.shape[0]
     placed = ~eligible
     level = jnp.full((n,), len(capacities), jnp.int32)
@@ -159,4 +200,6 @@ def assign_buckets(
         valid.append(ok)
     overflow = jnp.sum(eligible & (level < len(capacities)) & (level > min_level))
     unplaced = jnp.sum(eligible & (level == len(capacities)))
-    return Buckets(tuple(slots), tuple(valid), level, overflow, unplaced)
+    return Buckets(
+        tuple(slots), tuple(valid), level, overflow.astype(jnp.int32), unplaced.astype(jnp.int32)
+    )

@@ -73,6 +73,28 @@ def test_budget_equals_greedy_loop(seed):
     assert int(b.overflow) == int(np.sum(eligible & (want > min_level)))
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_unconstrained_branch_equals_greedy_fill_when_everything_fits(seed):
+    """The fast branch (no level overflows) gives the greedy fill's buckets slot for slot."""
+    from jcrowd.lod import _greedy as greedy_fill
+    from jcrowd.lod import _unconstrained
+
+    rng = np.random.default_rng(seed)
+    n = 400
+    min_level = jnp.asarray(rng.integers(0, 4, n))
+    eligible = jnp.asarray(rng.random(n) < 0.7)
+    counts = np.bincount(np.asarray(min_level)[np.asarray(eligible)], minlength=4)
+    caps = tuple(int(c) + int(rng.integers(0, 9)) for c in counts)  # every level fits
+    slow = greedy_fill(min_level, jnp.asarray(rng.normal(size=n)), eligible, caps)
+    fast = _unconstrained(jnp.where(eligible, min_level, 4), caps)
+    for a, b in zip(jax.tree.leaves(slow), jax.tree.leaves(fast), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    # The public entry takes the fast branch here and the greedy one once a level overflows.
+    small = (int(counts[0]) - 3, *caps[1:])
+    got = assign_buckets(min_level, jnp.asarray(rng.normal(size=n)), eligible, small)
+    assert int(got.overflow) + int(got.unplaced) >= 3
+
+
 def test_budget_small_capacity_most_important_get_level_zero_none_dropped():
     n = 50
     min_level = jnp.zeros(n, jnp.int32)  # everyone near
