@@ -12,8 +12,14 @@ In the same run, on the same agents:
   samples with its kriging weights (the samples as stored full-size ``(S, T, P)`` pose vectors,
   reconstructed from the model), full skeleton FK, no tensor, no LOD;
 - **full detail**: the level-0 decode + FK for every agent (agent-frames/s);
-- **roof**: bytes the step must move (state read + written, drawn points written) divided by
-  the bandwidth of a large copy measured in this process.
+- **roof**: bytes the step must move divided by the bandwidth of a large copy measured in this
+  process: every agent's per-step fields read and written (all of the state but the clips'
+  mixing vectors and the waypoint lists, of which one row is read), plus, per synthesized slot,
+  its two mixing vectors read and its drawn points written, plus the next-clip rows written.
+  (With the state donated, untouched buffers are not copied: the count is what a step needs.)
+
+Detail culling (``lod.min_pixels``, default 3 px) makes agents too small to show limbs dots
+(root only); a second 100k row with ``min_pixels = 0`` synthesizes every agent in view.
 
 ``python bench/step.py [--agents 1000,100000] [--json]``; appends a row to bench/RESULTS.md.
 """
@@ -23,6 +29,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from typing import Any
 
 import jax
@@ -142,10 +149,24 @@ def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
     return n / (_median_ms(lambda: f(*args), repeats) * 1e-3)
 
 
-def run_count(model: MotionModel, n: int, steps: int, bw: float) -> dict[str, Any]:
+def roof_bytes(state: Any, frame: Any, refresh: int) -> int:
+    """Bytes a step must read and write (module doc)."""
+    n = state.num_agents
+    per_step = sum(x.nbytes for k, x in vars(state).items() if k not in ("mix", "waypoints"))
+    mix_row = state.mix.nbytes // n  # both clip slots of one agent
+    slots = sum(int(p.shape[0]) for p in frame.points)
+    points = sum(int(np.prod(p.shape)) * 4 for p in frame.points)
+    return 2 * per_step + n * 8 + slots * mix_row + points + refresh * mix_row // 2
+
+
+def run_count(
+    model: MotionModel, n: int, steps: int, bw: float, min_pixels: float | None = None
+) -> dict[str, Any]:
     side = float(np.sqrt(10.0 * n))
     text = PLAZA.format(side=side + 2, inner=side, eye_z=-side / 2 - 0.5, n=n)
     sim, state = prepare(parse_scenario(text, "bench-plaza.toml"), model)
+    if min_pixels is not None:
+        sim = replace(sim, config=replace(sim.config, min_pixels=min_pixels))
     fn = sim.compiled()
     view, dt = sim.view_at(0.0), sim.dt
     t = time.perf_counter()
@@ -153,23 +174,26 @@ def run_count(model: MotionModel, n: int, steps: int, bw: float) -> dict[str, An
     compile_s = time.perf_counter() - t
     for _ in range(3):  # warm-up: past the first clip choices
         state, frame = fn(state, view, dt)
-    times, hist = [], np.zeros(len(sim.config.capacities) + 1)
+    times, hist, dots = [], np.zeros(len(sim.config.capacities) + 1), 0
     for _ in range(steps):
         t = time.perf_counter()
         state, frame = fn(state, view, dt)
         jax.block_until_ready(state)
         times.append(time.perf_counter() - t)
         hist += np.bincount(np.asarray(frame.level), minlength=len(hist))
+        dots += int(np.asarray(frame.dots).sum())
     ms = 1e3 * float(np.median(times))
     state_bytes = sum(x.nbytes for x in jax.tree.leaves(state))
-    points = sum(int(np.prod(p.shape)) * 4 for p in frame.points)
-    roof_ms = (2 * state_bytes + points) / (bw * 1e9) * 1e3
+    refresh = sim.config.refresh or n // 32 + 64
+    roof_ms = roof_bytes(state, frame, min(refresh, n)) / (bw * 1e9) * 1e3
     return {
         "agents": n,
+        "min_pixels": sim.config.min_pixels,
+        "dots": round(dots / steps, 1),
         "compile_s": compile_s,
         "ms_per_step": ms,
         "agent_steps_per_s": n / (ms * 1e-3),
-        "level_histogram": (hist / steps).round(1).tolist(),
+        "level_histogram": (hist / steps).round(1).tolist(),  # last: not synthesized
         "state_bytes_per_agent": state_bytes / n,
         "roof_ms_per_step": roof_ms,
         "recompiles": fn._cache_size() - 1,
@@ -199,6 +223,10 @@ def main() -> None:
             full_rate = max(full_rate, full_detail_rate(sim, state, min(n, 100_000), 3))
         rows.append(row)
         print(f"{n:,} agents: {row['ms_per_step']:.1f} ms/step", file=sys.stderr)
+        if n == 100_000:  # the same plaza with every agent in view synthesized
+            every = run_count(model, n, steps, bw, min_pixels=0.0)
+            every.pop("_sim")
+            rows.append(every)
     out = {
         "rows": rows,
         "naive_ms_per_step": naive,
@@ -224,16 +252,17 @@ def main() -> None:
 
 def _table(out: dict[str, Any]) -> str:
     lines = [
-        "| agents | compile s | ms/step | agent-steps/s | levels 0…5, culled (mean) | "
-        "state B/agent | roof ms | naive ms | speed-up vs naive |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| agents | min px | compile s | ms/step | agent-steps/s | levels 0…5, not synthesized "
+        "(mean) | of which dots | state B/agent | roof ms | naive ms | speed-up vs naive |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in out["rows"]:
         n = str(r["agents"])
         hist = " / ".join(f"{v:g}" for v in r["level_histogram"])
         lines.append(
-            f"| {r['agents']:,} | {r['compile_s']:.1f} | {r['ms_per_step']:.2f} | "
-            f"{r['agent_steps_per_s']:.3g} | {hist} | {r['state_bytes_per_agent']:.0f} | "
+            f"| {r['agents']:,} | {r['min_pixels']:g} | {r['compile_s']:.1f} | "
+            f"{r['ms_per_step']:.2f} | {r['agent_steps_per_s']:.3g} | {hist} | {r['dots']:g} | "
+            f"{r['state_bytes_per_agent']:.0f} | "
             f"{r['roof_ms_per_step']:.2f} | {out['naive_ms_per_step'][n]:.1f} | "
             f"{out['speedup_vs_naive'][n]:.1f}× |"
         )

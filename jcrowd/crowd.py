@@ -102,15 +102,18 @@ BUDGET_LAST = 16_384
 
 
 def default_capacities(agents: int, levels: int) -> tuple[int, ...]:
-    """The default budget: ``256 · 2^l`` agents at level l, 16,384 at the last (≤ ``agents``).
+    """The default budget: level l < L − 1 holds ``min(N / 2^(L − l) + 64, 256 · 2^l)``
+    agents, the last ``min(N, 16,384)``.
 
-    A fixed budget, not a share of the crowd: the screen holds only so many agents tall enough
-    to show detail, and every slot costs a decode whether used or not. Measured on the
-    1280×720 bench plaza (1 agent per 10 m²), at most ~300 agents sit at each of the levels
-    0–4 and ~10,000 at level 5 with 3-pixel detail culling, at 100k and at 1M agents alike.
-    Dense scenes close to the camera overflow coarser (counted), never vanish.
+    A share of a small crowd, a fixed budget for a large one: the screen holds only so many
+    agents tall enough to show detail, and every slot costs a decode whether used or not.
+    Measured on the 1280×720 bench plaza (1 agent per 10 m²), at most ~300 agents sit at each
+    of the levels 0–4 and ~13,000 at level 5 with 3-pixel detail culling, at 100k and at 1M
+    agents alike. Dense scenes close to the camera overflow coarser (counted), never vanish.
     """
-    caps = [BUDGET_FINEST * 2**lv for lv in range(levels - 1)]
+    caps = [
+        min(agents // 2 ** (levels - lv) + 64, BUDGET_FINEST * 2**lv) for lv in range(levels - 1)
+    ]
     return tuple(min(agents, c) for c in (*caps, BUDGET_LAST))
 
 
