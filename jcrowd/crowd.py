@@ -41,7 +41,7 @@ from jaxtyping import Array, Bool, Float, Int
 from jcrowd.clips import CrowdModel, local_to_world, next_clip
 from jcrowd.errors import JcrowdError
 from jcrowd.lod import CameraView, assign_buckets, distance_levels, in_frustum, screen_height_px
-from jcrowd.synthesis import decode_coeffs, level_points, pose_from_coeffs, root_rates
+from jcrowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
 
 __all__ = ["CrowdState", "Frame", "StepConfig", "default_capacities", "init_state", "step"]
 
@@ -245,11 +245,15 @@ def _agent_level(
     last = float(cm.frames - 1)
     k = state.current[i]
 
+    # The clips' cores are computed once and evaluated at both phases the foot lock needs.
+    core = clip_core(lv, state.mix[i, k])
+    core_next = clip_core(lv, state.mix[i, 1 - k]) if near else core
+
     def pose(tau: Array) -> Array:
-        g = decode_coeffs(lv, state.mix[i, k], tau)
+        g = coeffs_at(lv, core, tau)
         if near:
             s = jnp.where(state.has_next[i], _smoothstep((tau - last / 2) / (last / 2)), 0.0)
-            g = g + s * (decode_coeffs(lv, state.mix[i, 1 - k], tau) - g)
+            g = g + s * (coeffs_at(lv, core_next, tau) - g)
         return pose_from_coeffs(lv, g)
 
     tau, h, heading = state.tau[i], state.height[i], state.heading[i]

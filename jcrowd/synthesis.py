@@ -44,7 +44,9 @@ __all__ = [
     "LevelDecoder",
     "RootRates",
     "build_decoders",
+    "clip_core",
     "clip_weights",
+    "coeffs_at",
     "decode_coeffs",
     "level_points",
     "pose_from_coeffs",
@@ -208,18 +210,33 @@ def clip_weights(decoders: Decoders, c: Float[Array, " d"]) -> Float[Array, " A"
     return jnp.concatenate([b, jnp.ones((1,), x.dtype), x])
 
 
-def decode_coeffs(
-    level: LevelDecoder, a: Float[Array, " A"], tau: Float[Array, ""]
+def clip_core(level: LevelDecoder, a: Float[Array, " A"]) -> Float[Array, "RP RT"]:
+    """The clip's core ``K(c) = a V`` at a level (000 Eq. 8), for one agent."""
+    return jnp.dot(a, level.cores, precision=_HI).reshape(level.ranks)
+
+
+def coeffs_at(
+    level: LevelDecoder, core: Float[Array, "RP RT"], tau: Float[Array, ""]
 ) -> Float[Array, " R"]:
-    """``g = K(c) w_T(τ)`` (000 Eqs. 5, 8) for one agent; τ is clamped to ``[0, T − 1]``."""
+    """``g = K w_T(τ)`` (000 Eq. 5) for one agent's core; τ is clamped to ``[0, T − 1]``.
+
+    ``w_T(τ)`` interpolates linearly between the rows of ``Ũ_T`` round τ.
+    """
     last = level.u_time.shape[0] - 1
     tau = jnp.clip(jnp.asarray(tau, level.u_time.dtype), 0.0, float(last))
     i0 = jnp.minimum(jnp.floor(tau), float(last - 1))
     frac = tau - i0
     w = jax.lax.dynamic_slice_in_dim(level.u_time, i0.astype(jnp.int32), 2, axis=0)
     w_t = w[0] + frac * (w[1] - w[0])
-    core = jnp.dot(a, level.cores, precision=_HI).reshape(level.ranks)
     return jnp.dot(core, w_t, precision=_HI)
+
+
+def decode_coeffs(
+    level: LevelDecoder, a: Float[Array, " A"], tau: Float[Array, ""]
+) -> Float[Array, " R"]:
+    """``g = K(c) w_T(τ)`` (000 Eqs. 5, 8) for one agent: :func:`clip_core` then
+    :func:`coeffs_at`. To evaluate one clip at several phases, compute the core once."""
+    return coeffs_at(level, clip_core(level, a), tau)
 
 
 def pose_from_coeffs(level: LevelDecoder, g: Float[Array, " R"]) -> Float[Array, " P"]:
