@@ -19,7 +19,9 @@ In the same run, on the same agents:
   (With the state donated, untouched buffers are not copied: the count is what a step needs.)
 
 Detail culling (``lod.min_pixels``, default 3 px) makes agents too small to show limbs dots
-(root only); a second 100k row with ``min_pixels = 0`` synthesizes every agent in view.
+(root only), and agents beyond the last level's capacity (16,384 by default) are dots too; a
+second 100k row with ``min_pixels = 0`` and a last capacity of N synthesizes every agent in view
+(the step before detail culling).
 
 ``python bench/step.py [--agents 1000,100000] [--json]``; appends a row to bench/RESULTS.md.
 """
@@ -165,8 +167,9 @@ def run_count(
     side = float(np.sqrt(10.0 * n))
     text = PLAZA.format(side=side + 2, inner=side, eye_z=-side / 2 - 0.5, n=n)
     sim, state = prepare(parse_scenario(text, "bench-plaza.toml"), model)
-    if min_pixels is not None:
-        sim = replace(sim, config=replace(sim.config, min_pixels=min_pixels))
+    if min_pixels is not None:  # every agent in view synthesized: no dots at all
+        caps = (*sim.config.capacities[:-1], n)
+        sim = replace(sim, config=replace(sim.config, min_pixels=min_pixels, capacities=caps))
     fn = sim.compiled()
     view, dt = sim.view_at(0.0), sim.dt
     t = time.perf_counter()

@@ -15,23 +15,33 @@ can blend it in over the second half (:mod:`jcrowd.crowd`). The choice, for one 
    region is not convex, so a box alone does not keep the prediction trustworthy).
 
 Controls named ``speed`` or ``height`` (if the model has them) take the agent's own values.
-Everything here is written for one agent and batched with ``vmap`` by the caller.
+:func:`next_clip` is written for one agent (batched with ``vmap``); :func:`next_clips` is the
+same choice for many agents at once with the kriging in matrix form (one GEMM per operator
+instead of a matrix-vector product per agent; the crowd step's per-step batch).
 """
 
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
 from jcrowd.errors import KrigingError
 from jcrowd.gait import find_feet
-from jcrowd.kriging.universal import reliability_one
+from jcrowd.kriging.universal import reliability_one, weights_and_reliability
 from jcrowd.model import MotionModel
 from jcrowd.synthesis import Decoders, build_decoders, clip_weights
 
-__all__ = ["CrowdModel", "build_crowd_model", "choose_controls", "local_to_world", "next_clip"]
+__all__ = [
+    "CrowdModel",
+    "build_crowd_model",
+    "choose_controls",
+    "local_to_world",
+    "next_clip",
+    "next_clips",
+]
 
 
 class CrowdModel(eqx.Module):
@@ -105,16 +115,15 @@ def local_to_world(v: Float[Array, "... 2"], heading: Float[Array, ...]) -> Arra
     return jnp.stack([v[..., 0] * c + v[..., 1] * s, -v[..., 0] * s + v[..., 1] * c], axis=-1)
 
 
-def choose_controls(
+def _aim(
     cm: CrowdModel,
     position: Float[Array, " 2"],
     heading: Float[Array, ""],
     target: Float[Array, " 2"],
     speed: Float[Array, ""],
     height: Float[Array, ""],
-    min_reliability: float,
 ) -> Float[Array, " d"]:
-    """Controls of a cycle starting at ``(position, heading)`` that walks towards ``target``."""
+    """Steps 2–4 of the module doc up to the box clamp (no reliability pull), one agent."""
     ix, iz, iyaw, ispeed, iheight = cm.index
     left, fwd = local_to_world(target - position, -heading)  # the target in the heading frame
     turn = jnp.clip(jnp.arctan2(left, fwd), cm.lo[iyaw], cm.hi[iyaw])
@@ -126,7 +135,20 @@ def choose_controls(
         c = c.at[ispeed].set(speed)
     if iheight >= 0:
         c = c.at[iheight].set(height)
-    c = jnp.clip(c, cm.lo, cm.hi)
+    return jnp.clip(c, cm.lo, cm.hi)
+
+
+def choose_controls(
+    cm: CrowdModel,
+    position: Float[Array, " 2"],
+    heading: Float[Array, ""],
+    target: Float[Array, " 2"],
+    speed: Float[Array, ""],
+    height: Float[Array, ""],
+    min_reliability: float,
+) -> Float[Array, " d"]:
+    """Controls of a cycle starting at ``(position, heading)`` that walks towards ``target``."""
+    c = _aim(cm, position, heading, target, speed, height)
     k = cm.decoders.kriging
     d2 = jnp.sum(((cm.sample_controls - c) / k.control_scale) ** 2, axis=1)
     nearest = cm.sample_controls[jnp.argmin(d2)]
@@ -152,3 +174,37 @@ def next_clip(
     c = choose_controls(cm, end, origin[2] + control[iyaw], target, speed, height, min_reliability)
     a = clip_weights(cm.decoders, c)
     return c, a, jnp.dot(a, cm.duration)
+
+
+def next_clips(
+    cm: CrowdModel,
+    origin: Float[Array, "M 3"],
+    control: Float[Array, "M d"],
+    target: Float[Array, "M 2"],
+    speed: Float[Array, " M"],
+    height: Float[Array, " M"],
+    min_reliability: float,
+) -> tuple[Array, Array, Array]:
+    """:func:`next_clip` for ``M`` agents at once, the kriging as matrix products.
+
+    Returns ``(controls (M, d), mixing vectors (M, A), durations (M,))``.
+    """
+    ix, iz, iyaw = cm.index[:3]
+    end = origin[:, :2] + local_to_world(control[:, [ix, iz]], origin[:, 2])
+    c = jax.vmap(lambda e, h, t, s, ht: _aim(cm, e, h, t, s, ht))(
+        end, origin[:, 2] + control[:, iyaw], target, speed, height
+    )
+    k = cm.decoders.kriging
+    # Squared scaled distances to every sample, summed per control column (see
+    # jcrowd.kriging.universal._terms_matrix on why not a (M, S, d) broadcast).
+    d2 = sum(
+        ((cm.sample_controls[None, :, j] - c[:, j, None]) / k.control_scale[j]) ** 2
+        for j in range(c.shape[1])
+    )
+    nearest = cm.sample_controls[jnp.argmin(d2, axis=1)]
+    _, rho = weights_and_reliability(k, c)
+    c = jnp.where((rho < min_reliability)[:, None], 0.5 * (c + nearest), c)
+    b, _ = weights_and_reliability(k, c)
+    x = (c - k.control_mean) / k.control_scale
+    a = jnp.concatenate([b, jnp.ones((c.shape[0], 1), c.dtype), x], axis=1)
+    return c, a, a @ cm.duration

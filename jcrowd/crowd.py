@@ -38,7 +38,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.clips import CrowdModel, local_to_world, next_clip
+from jcrowd.clips import CrowdModel, local_to_world, next_clips
 from jcrowd.errors import JcrowdError
 from jcrowd.lod import CameraView, assign_buckets, distance_levels, in_frustum, screen_height_px
 from jcrowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
@@ -223,9 +223,7 @@ def _first_clips(
     height: Array,
     min_reliability: float,
 ) -> tuple[Array, Array, Array]:
-    return jax.vmap(lambda o, c0, t, s, h: next_clip(cm, o, c0, t, s, h, min_reliability))(
-        origin, control, target, speed, height
-    )
+    return next_clips(cm, origin, control, target, speed, height, min_reliability)
 
 
 def _smoothstep(x: Array) -> Array:
@@ -360,14 +358,14 @@ def _schedule(cm: CrowdModel, config: StepConfig, state: CrowdState) -> tuple[Cr
     (idx,) = jnp.nonzero(need, size=min(config.refresh or n // 32 + 64, n), fill_value=n)
     safe = jnp.where(idx < n, idx, 0)
     tgt = state.waypoints[safe, wp[safe]]
-    c, a, dur = jax.vmap(
-        lambda o, c0, t, s, h: next_clip(cm, o, c0, t, s, h, config.min_reliability)
-    )(
+    c, a, dur = next_clips(
+        cm,
         state.origin[safe],
         state.control[safe, state.current[safe]],
         tgt,
         state.speed[safe],
         state.height[safe],
+        config.min_reliability,
     )
     slot = 1 - state.current[safe]
     control = state.control.at[idx, slot].set(c, mode="drop")

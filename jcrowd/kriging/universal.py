@@ -61,6 +61,7 @@ __all__ = [
     "prediction_variance",
     "reliability",
     "reliability_one",
+    "weights_and_reliability",
 ]
 
 _HIGHEST = jax.lax.Precision.HIGHEST
@@ -324,8 +325,8 @@ def _batched(fn: Callable, model: KrigingModel, c: Any) -> Any:
     return jax.tree.map(lambda o: o.reshape(lead + o.shape[1:]), out)
 
 
-def _weights_matrix(model: KrigingModel, c: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """b and μ for ``(Q, d)`` queries at once, as matrix products.
+def _terms_matrix(model: KrigingModel, c: jax.Array) -> tuple[jax.Array, ...]:
+    """γ (Q, S), f (Q, q), b (Q, S) and μ (Q, q) for ``(Q, d)`` queries, as matrix products.
 
     The same sums as :func:`kriging_weights` under ``vmap``, arranged for throughput: the
     variogram family is chosen once by ``lax.cond`` on the scalar exponent (under ``vmap`` both
@@ -357,7 +358,27 @@ def _weights_matrix(model: KrigingModel, c: jax.Array) -> tuple[jax.Array, jax.A
     mu = jnp.matmul(g, model.lagrange_gamma.T, precision=_HIGHEST) + jnp.matmul(
         f, model.lagrange_drift.T, precision=_HIGHEST
     )
+    return g, f, b, mu
+
+
+def _weights_matrix(model: KrigingModel, c: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """b and μ for ``(Q, d)`` queries at once (:func:`_terms_matrix`)."""
+    _, _, b, mu = _terms_matrix(model, c)
     return b, mu
+
+
+def weights_and_reliability(
+    model: KrigingModel, c: Float[jax.Array, "Q d"]
+) -> tuple[Float[jax.Array, "Q S"], Float[jax.Array, " Q"]]:
+    """Kriging weights ``b(c)`` and reliability ρ(c) (001 App. B) of ``(Q, d)`` queries.
+
+    Pure and unchecked, in matrix form: the batched kernel for compiled code that needs both
+    (the crowd's clip choice), equal to :func:`kriging_weights` and :func:`reliability_one`
+    under ``vmap``.
+    """
+    g, _, b, _ = _terms_matrix(model, jnp.asarray(c, model.controls.dtype))
+    sill = model.variogram.theta[0] + model.variogram.theta[1]
+    return b, 1.0 - jnp.sum(b * g, axis=1) / sill
 
 
 @eqx.filter_jit
