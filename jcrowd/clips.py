@@ -11,8 +11,12 @@ can blend it in over the second half (:mod:`jcrowd.crowd`). The choice, for one 
 3. A turning cycle's displacement is the chord of an arc: stride ``L`` (speed × the model's
    median cycle duration) at half the turn, ``(dx, dz) = L (sin(dyaw/2), cos(dyaw/2))``.
 4. Clamp into the model's control box, and where the kriging reliability ρ (001 App. B) falls
-   below a threshold, pull the controls half way towards the nearest sample (the reliable
-   region is not convex, so a box alone does not keep the prediction trustworthy).
+   below a threshold, take the average of the kriged clip and the nearest sample's own clip
+   (the reliable region is not convex, so a box alone does not keep the prediction
+   trustworthy). Reading taken for "prefer the reliable region" (000 §5.2 / the issue): the
+   mixing vector is ``(a(c) + a(s_n)) / 2``, so the core is ``(K(c) + K_n) / 2`` — half a
+   captured cycle — and its controls ``(c + s_n) / 2``. Kriging at the halfway controls instead
+   would need a second kriging solve per choice; this needs one.
 
 Controls named ``speed`` or ``height`` (if the model has them) take the agent's own values.
 :func:`next_clip` is written for one agent (batched with ``vmap``); :func:`next_clips` is the
@@ -148,12 +152,30 @@ def choose_controls(
     min_reliability: float,
 ) -> Float[Array, " d"]:
     """Controls of a cycle starting at ``(position, heading)`` that walks towards ``target``."""
+    return _choose(cm, position, heading, target, speed, height, min_reliability)[0]
+
+
+def _choose(
+    cm: CrowdModel,
+    position: Float[Array, " 2"],
+    heading: Float[Array, ""],
+    target: Float[Array, " 2"],
+    speed: Float[Array, ""],
+    height: Float[Array, ""],
+    min_reliability: float,
+) -> tuple[Array, Array]:
+    """``(controls, mixing vector)`` of the next clip, one agent (module doc, step 4)."""
     c = _aim(cm, position, heading, target, speed, height)
     k = cm.decoders.kriging
     d2 = jnp.sum(((cm.sample_controls - c) / k.control_scale) ** 2, axis=1)
-    nearest = cm.sample_controls[jnp.argmin(d2)]
-    rho = reliability_one(k, c)
-    return jnp.where(rho < min_reliability, 0.5 * (c + nearest), c)
+    n = jnp.argmin(d2)
+    a = clip_weights(cm.decoders, c)
+    a_n = clip_weights(cm.decoders, cm.sample_controls[n])
+    pull = reliability_one(k, c) < min_reliability
+    return (
+        jnp.where(pull, 0.5 * (c + cm.sample_controls[n]), c),
+        jnp.where(pull, 0.5 * (a + a_n), a),
+    )
 
 
 def next_clip(
@@ -171,8 +193,7 @@ def next_clip(
     """
     ix, iz, iyaw = cm.index[:3]
     end = origin[:2] + local_to_world(jnp.stack([control[ix], control[iz]]), origin[2])
-    c = choose_controls(cm, end, origin[2] + control[iyaw], target, speed, height, min_reliability)
-    a = clip_weights(cm.decoders, c)
+    c, a = _choose(cm, end, origin[2] + control[iyaw], target, speed, height, min_reliability)
     return c, a, jnp.dot(a, cm.duration)
 
 
@@ -201,10 +222,16 @@ def next_clips(
         ((cm.sample_controls[None, :, j] - c[:, j, None]) / k.control_scale[j]) ** 2
         for j in range(c.shape[1])
     )
-    nearest = cm.sample_controls[jnp.argmin(d2, axis=1)]
-    _, rho = weights_and_reliability(k, c)
-    c = jnp.where((rho < min_reliability)[:, None], 0.5 * (c + nearest), c)
-    b, _ = weights_and_reliability(k, c)
+    n = jnp.argmin(d2, axis=1)
+    b, rho = weights_and_reliability(k, c)
+    pull = (rho < min_reliability)[:, None]
     x = (c - k.control_mean) / k.control_scale
     a = jnp.concatenate([b, jnp.ones((c.shape[0], 1), c.dtype), x], axis=1)
+    # The nearest sample's own clip: one-hot weights (kriging interpolates the samples).
+    nearest = cm.sample_controls[n]
+    x_n = (nearest - k.control_mean) / k.control_scale
+    one = jnp.ones((c.shape[0], 1), c.dtype)
+    a_n = jnp.concatenate([jax.nn.one_hot(n, b.shape[1], dtype=b.dtype), one, x_n], axis=1)
+    a = jnp.where(pull, 0.5 * (a + a_n), a)
+    c = jnp.where(pull, 0.5 * (c + nearest), c)
     return c, a, a @ cm.duration

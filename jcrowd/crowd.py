@@ -146,9 +146,13 @@ class CrowdState(eqx.Module):
 
     def clip(self, which: str = "current") -> tuple[Array, Array, Array]:
         """``(control (N, d), mix (N, A), duration (N,))`` of the current or the next clip."""
-        rows = jnp.arange(self.num_agents)
-        k = self.current if which == "current" else 1 - self.current
-        return self.control[rows, k], self.mix[rows, k], self.duration[rows, k]
+        # A select, not a gather: XLA:CPU vectorizes it (the gather cost 5x more at 1M agents).
+        first = (self.current == 0) if which == "current" else (self.current == 1)
+        return (
+            jnp.where(first[:, None], self.control[:, 0], self.control[:, 1]),
+            jnp.where(first[:, None], self.mix[:, 0], self.mix[:, 1]),
+            jnp.where(first, self.duration[:, 0], self.duration[:, 1]),
+        )
 
 
 class Frame(eqx.Module):
@@ -283,9 +287,10 @@ def _dead_reckoning(cm: CrowdModel, state: CrowdState, dt: Array) -> tuple[Array
     # Constant speed and turn rate over the cycle end at (dx, dz) with heading + turn when the
     # local velocity is the chord rotated back by half the turn, lengthened by θ/2 / sin(θ/2).
     gain = jnp.where(jnp.abs(half) > 1e-4, half / jnp.sin(jnp.where(half == 0, 1.0, half)), 1.0)
-    chord = jnp.stack([control[:, ix], control[:, iz]], axis=1) * gain[:, None]
-    local = local_to_world(chord, -half)
-    return dtau, turn * frac, local_to_world(local * frac[:, None], state.heading)
+    chord = jnp.stack([control[:, ix], control[:, iz]], axis=1) * (gain * frac)[:, None]
+    # Rotating by −half into the heading frame and then into the world is one rotation by
+    # heading − half (three transcendentals per agent instead of five).
+    return dtau, turn * frac, local_to_world(chord, state.heading - half)
 
 
 def step(
