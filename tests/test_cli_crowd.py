@@ -185,3 +185,33 @@ def test_demo_writes_mp4_and_png(tmp_path: Path, capsys: pytest.CaptureFixture[s
 def test_shipped_demo_scenario_is_the_example() -> None:
     shipped = (ROOT / "jcrowd" / "assets" / "plaza.toml").read_text()
     assert shipped == (ROOT / "examples" / "plaza.toml").read_text()
+
+
+def test_dots_are_recorded_and_drawn(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """With a huge ``min_pixels`` every agent in view is a dot: recorded, counted and drawn."""
+    import imageio.v3 as iio
+
+    scene = tmp_path / "dots.toml"
+    scene.write_text(SMALL.replace("[[groups]]", "[lod]\nmin_pixels = 1000\n[[groups]]"))
+    out = tmp_path / "run.npz"
+    code, result = _json(
+        capsys,
+        ["run", str(scene), "--steps", "3", "--record", "visible", "--out", str(out), "--json"],
+    )
+    assert code == 0 and result["dots_per_step"] > 0
+    assert result["level_histogram"][-1] == pytest.approx(12)  # nobody synthesized
+    rec = dict(np.load(out))
+    assert rec["dots"].shape == (3, 12) and rec["dots"].any()
+    no_dots = tmp_path / "no_dots.npz"
+    np.savez(no_dots, **{**rec, "dots": np.zeros_like(rec["dots"])})
+    images = []
+    for name, src in (("with", out), ("without", no_dots)):
+        code, _ = _json(
+            capsys,
+            ["render", str(src), "--out", str(tmp_path / name), "--frames", "1", "--json"],
+        )
+        assert code == 0
+        images.append(iio.imread(sorted((tmp_path / name).glob("*.png"))[0]).astype(int))
+    # The dots are the only difference: some pixels change, most (ground, sky) do not.
+    changed = np.any(images[0] != images[1], axis=-1).mean()
+    assert 0 < changed < 0.2

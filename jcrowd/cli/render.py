@@ -215,7 +215,10 @@ def render_recording(
     sink = _Sink(out, float(rec["fps"]))
     ok = False
     try:
-        with CrowdRenderer([parents] * nlev, w, h, capacity=caps) as renderer:
+        dots = "dots" in rec  # recordings made before detail culling have none
+        n = len(rec["height"])
+        meshes = [parents] * nlev + ([DOT_PARENTS] if dots else [])
+        with CrowdRenderer(meshes, w, h, capacity=caps + ([n] if dots else [])) as renderer:
             for i in range(n_frames):
                 t = time.perf_counter()
                 levels = [
@@ -226,6 +229,10 @@ def render_recording(
                     )
                     for lv in range(nlev)
                 ]
+                if dots:
+                    sticks = _dot_sticks(rec["position"][i], rec["height"])
+                    colors = _colors(color_by, nlev, np.arange(n), group_colors)
+                    levels.append(LevelInstances(sticks, rec["dots"][i], colors))
                 view = View(
                     tuple(rec["eye"][i]), tuple(rec["target"][i]), fov_deg=fov, near=near, far=far
                 )

@@ -7,7 +7,8 @@ recorded per step. ``recompiles`` counts compilations after the first (0 is the 
 Recording (``--out run.npz``, written atomically):
 
 - ``roots`` (default): per step and agent the root ``position (x, z)``, ``heading``, ``level``
-  (``L`` = culled) and ``alive``.
+  (``L`` = not synthesized: culled, or a dot), ``dots`` (in view but below ``lod.min_pixels``
+  or beyond the budget: drawn at the root) and ``alive``.
 - ``visible``: also, per level, the slots' agent ids and joint/End Site positions
   (``points_l``: steps × capacity × points × 3).
 - ``all``: also each agent's clip state (phase, controls of the current and next clip, whether
@@ -18,7 +19,7 @@ per process): JAX's multi-process runtime (``jax.distributed``; gloo collectives
 every process's devices into one mesh, the agent axis is split over it, each process feeds its
 own block of agents, and process 0 writes the recording. Each process prints its own JSON.
 
-Arrays are named ``position``, ``heading``, ``level``, ``alive``, ``slots_l``, ``valid_l``,
+Arrays are named ``position``, ``heading``, ``level``, ``dots``, ``alive``, ``slots_l``, ``valid_l``,
 ``points_l``, ``tau``, ``control``, ``control_next``, ``has_next`` plus ``height``, ``group``,
 ``color``, ``parents`` (bones to draw), ``eye``/``target`` per step and ``lens`` (fov, near,
 far) of the camera, ``fps`` and ``model`` (the model file used).
@@ -173,7 +174,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
     jax.block_until_ready(step(warm, sim.view_at(0.0), sim.dt))  # compile (+ one step, dropped)
     compile_s = time.perf_counter() - t0
     rec: dict[str, list] = {
-        k: [] for k in ("position", "heading", "level", "alive", "eye", "target")
+        k: [] for k in ("position", "heading", "level", "dots", "alive", "eye", "target")
     }
     if record in ("visible", "all"):
         for lv in range(nlev):
@@ -183,7 +184,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
         for k in ("tau", "control", "control_next", "has_next"):
             rec[k] = []
     times, hist = [], np.zeros(nlev + 1, np.int64)
-    overflow = deferred = 0
+    overflow = deferred = dots = 0
     with Progress(console=Console(file=sys.stderr), transient=True) as bar:
         task = bar.add_task(f"{n:,} agents", total=steps)
         for i in range(steps):
@@ -209,7 +210,12 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
             new, frame = step(state, view, sim.dt)
             jax.block_until_ready(new)
             times.append(time.perf_counter() - t)
-            parts = {"level": frame.level, "overflow": frame.overflow, "deferred": frame.deferred}
+            parts = {
+                "level": frame.level,
+                "dots": frame.dots,
+                "overflow": frame.overflow,
+                "deferred": frame.deferred,
+            }
             if record != "roots":
                 parts.update(
                     {
@@ -224,6 +230,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
             for key, value in host.items():
                 rec[key].append(value)
             hist += np.bincount(np.asarray(host["level"]), minlength=nlev + 1)
+            dots += int(np.sum(host["dots"]))
             state = new
             bar.advance(task)
     recompiles = step._cache_size() - 1
@@ -243,6 +250,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
         "ms_per_step_median": 1e3 * float(np.median(times)),
         "compile_s": compile_s,
         "level_histogram": (hist / steps).round(1).tolist(),
+        "dots_per_step": dots / steps,
         "recompiles": int(recompiles),
         "overflow_per_step": overflow / steps,
         "deferred_clips": deferred,
@@ -257,6 +265,7 @@ def _print(result: dict[str, Any]) -> None:
         f"{result['agents']:,} agents × {result['steps']} steps: "
         f"{result['ms_per_step_median']:.2f} ms/step (median), "
         f"compile {result['compile_s']:.1f} s, {result['recompiles']} recompiles\n"
-        f"mean agents per level (last = culled): [{hist}]\n"
+        f"mean agents per level (last = not synthesized): [{hist}], "
+        f"{result['dots_per_step']:g} of them drawn as dots\n"
         + (f"recording: {result['out']}\n" if result["out"] else "")
     )
