@@ -222,7 +222,11 @@ def next_clips(
         ((cm.sample_controls[None, :, j] - c[:, j, None]) / k.control_scale[j]) ** 2
         for j in range(c.shape[1])
     )
-    n = jnp.argmin(d2, axis=1)
+    # First index of the row minimum, as two single-operand reductions (argmin's paired
+    # reduction was 8 ms for 31k agents on XLA:CPU).
+    s = d2.shape[1]
+    first = jnp.where(d2 == d2.min(axis=1, keepdims=True), jnp.arange(s)[None, :], s)
+    n = jnp.minimum(first.min(axis=1), s - 1)
     b, rho = weights_and_reliability(k, c)
     pull = (rho < min_reliability)[:, None]
     x = (c - k.control_mean) / k.control_scale

@@ -19,11 +19,10 @@ per process): JAX's multi-process runtime (``jax.distributed``; gloo collectives
 every process's devices into one mesh, the agent axis is split over it, each process feeds its
 own block of agents, and process 0 writes the recording. Each process prints its own JSON.
 
-Arrays are named ``position``, ``heading``, ``level``, ``dots``, ``alive``, ``slots_l``, ``valid_l``,
-``points_l``, ``tau``, ``control``, ``control_next``, ``has_next`` plus ``height``, ``group``,
-``color``, ``parents`` (bones to draw), ``eye``/``target`` per step and ``lens`` (fov, near,
-far) of the camera, ``fps`` and ``model`` (the model file used).
-"""
+Arrays are named ``position``, ``heading``, ``level``, ``dots``, ``alive``, ``slots_l``,
+``valid_l``, ``points_l``, ``tau``, ``control``, ``control_next``, ``has_next`` plus ``height``,
+``group``, ``color``, ``parents`` (bones to draw), ``eye``/``target`` per step and ``lens``
+(fov, near, far) of the camera, ``fps`` and ``model`` (the model file used)."""
 
 from __future__ import annotations
 
