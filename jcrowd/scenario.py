@@ -21,17 +21,24 @@ The parser only walks the tables (unknown and missing keys) and prefixes the fil
 
 from __future__ import annotations
 
-import json
 import math
-import numbers
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from jaxtyping import Bool, Float
 
-from jcrowd.errors import ScenarioError
+from jcrowd.scenario_check import (
+    Problem,
+    Raw,
+    is_int,
+    real,
+    reals,
+    require,
+    show,
+    value_range,
+)
+from jcrowd.scenario_check import points as point_list
 from jcrowd.scenario_spawn import (
     Spawn,
     polygon_area,
@@ -66,81 +73,6 @@ SPEED_RANGE = (0.3, 3.0)  # m/s a walker may be given
 HEIGHT_RANGE = (1.0, 2.2)  # m, standing heights the model is scaled to
 
 
-class _Problem(ScenarioError):
-    """A failed check inside a dataclass; ``key`` is relative to the object being built."""
-
-    def __init__(self, key: str, detail: str) -> None:
-        super().__init__(f"{key}: {detail}" if key else detail)
-        self.key, self.detail = key, detail
-
-
-class _Raw(str):
-    """Text shown as is in a message (``_show`` quotes a plain string)."""
-
-
-def _show(value: Any) -> str:
-    """A value as TOML would spell it, shortened, for error messages."""
-    if isinstance(value, _Raw):
-        return str(value)
-    if isinstance(value, np.ndarray):
-        value = value.tolist()
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return json.dumps(value, ensure_ascii=False)
-    if isinstance(value, numbers.Real):
-        return repr(float(value)) if isinstance(value, float) else str(value)
-    if isinstance(value, Mapping):
-        return "a table {" + ", ".join(map(str, value)) + "}"
-    if isinstance(value, list | tuple):
-        items = [_show(v) for v in value[:6]] + (["…"] if len(value) > 6 else [])
-        return "[" + ", ".join(items) + "]"
-    return str(value)
-
-
-def _require(ok: Any, key: str, expected: str, found: Any) -> None:
-    if not ok:
-        raise _Problem(key, f"expected {expected}, found {_show(found)}")
-
-
-def _real(v: Any) -> bool:
-    return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def _is_int(v: Any) -> bool:
-    return isinstance(v, numbers.Integral) and not isinstance(v, bool)
-
-
-def _reals(value: Any, key: str, expected: str, n: int | None = None) -> np.ndarray:
-    """A 1-D float64 array of finite numbers (``n`` of them when given); no bools or strings."""
-    if isinstance(value, np.ndarray):
-        ok = value.ndim == 1 and value.dtype.kind in "iuf" and bool(np.all(np.isfinite(value)))
-    else:
-        ok = isinstance(value, list | tuple) and all(_real(v) for v in value)
-    _require(ok and len(value) > 0 and (n is None or len(value) == n), key, expected, value)
-    return np.array(value, np.float64)
-
-
-def _points(value: Any, key: str) -> np.ndarray:
-    """A ``(P, 2)`` float64 array of ``[x, z]`` points, P ≥ 1."""
-    if isinstance(value, np.ndarray):
-        ok = value.ndim == 2 and value.shape[1] == 2 and value.dtype.kind in "iuf"
-        ok = ok and len(value) > 0 and bool(np.all(np.isfinite(value)))
-    else:
-        ok = isinstance(value, list | tuple) and len(value) > 0
-        ok = ok and all(isinstance(p, list | tuple) and len(p) == 2 for p in value)
-        ok = ok and all(_real(v) for p in value for v in p)
-    _require(ok, key, "a list of [x, z] points (m)", value)
-    return np.array(value, np.float64)
-
-
-def _range(value: Any, key: str, bounds: tuple[float, float], unit: str) -> tuple[float, float]:
-    expected = f"[lo, hi] {unit} with {bounds[0]} ≤ lo ≤ hi ≤ {bounds[1]}"
-    lo, hi = (value, value) if _real(value) else _reals(value, key, expected, 2)
-    _require(bounds[0] <= lo <= hi <= bounds[1], key, expected, value)
-    return float(lo), float(hi)
-
-
 # ----------------------------------------------------------------------------------- data model
 
 
@@ -164,23 +96,26 @@ class Region:
     def __post_init__(self) -> None:
         put = object.__setattr__
         kinds = '"rect", "circle" or "polygon"'
-        _require(self.kind in ("rect", "circle", "polygon"), "shape", kinds, self.kind)
+        require(self.kind in ("rect", "circle", "polygon"), "shape", kinds, self.kind)
         if self.kind == "polygon":
-            points = _points(self.points, "points")
+            points = point_list(self.points, "points")
             problem = polygon_problem(points)
             if problem is not None:
-                raise _Problem("points", problem)
+                raise Problem("points", problem)
             put(self, "points", points)
             put(self, "_triangles", triangulate(points))
             return
-        put(self, "center", _reals(self.center, "center", "[x, z] (m)", 2))
+        put(self, "center", reals(self.center, "center", "[x, z] (m)", 2))
         if self.kind == "rect":
-            size = _reals(self.size, "size", "[width, depth] (m)", 2)
-            _require(np.all(size > 0), "size", "[width, depth] both > 0 (m)", self.size)
+            size = reals(self.size, "size", "[width, depth] (m)", 2)
+            require(np.all(size > 0), "size", "[width, depth] both > 0 (m)", self.size)
             put(self, "size", size)
         else:
-            _require(
-                _real(self.radius) and self.radius > 0, "radius", "a radius > 0 (m)", self.radius
+            require(
+                real(self.radius) and self.radius > 0,
+                "radius",
+                "a radius > 0 (m)",
+                self.radius,
             )
             put(self, "radius", float(self.radius))
 
@@ -243,16 +178,16 @@ class Path:
     loop: bool = False
 
     def __post_init__(self) -> None:
-        w = _points(self.waypoints, "waypoints")
-        _require(isinstance(self.loop, bool), "loop", "true or false", self.loop)
-        _require(not self.loop or len(w) >= 2, "loop", "false for a single waypoint", self.loop)
+        w = point_list(self.waypoints, "waypoints")
+        require(isinstance(self.loop, bool), "loop", "true or false", self.loop)
+        require(not self.loop or len(w) >= 2, "loop", "false for a single waypoint", self.loop)
         same = np.all(w[1:] == w[:-1], axis=1)
         if same.any():
             k = int(np.argmax(same)) + 1
-            _require(False, f"waypoints[{k}]", f"a point other than waypoints[{k - 1}]", w[k])
+            require(False, f"waypoints[{k}]", f"a point other than waypoints[{k - 1}]", w[k])
         if self.loop and np.all(w[0] == w[-1]):
             expected = "a point other than waypoints[0] (a looped path returns there by itself)"
-            _require(False, f"waypoints[{len(w) - 1}]", expected, w[-1])
+            require(False, f"waypoints[{len(w) - 1}]", expected, w[-1])
         object.__setattr__(self, "waypoints", w)
 
 
@@ -278,18 +213,18 @@ class Group:
 
     def __post_init__(self) -> None:
         put = object.__setattr__
-        _require(isinstance(self.name, str) and self.name, "name", "a non-empty string", self.name)
-        ok = _is_int(self.count) and self.count > 0
-        _require(ok, "count", "a positive integer", self.count)
+        require(isinstance(self.name, str) and self.name, "name", "a non-empty string", self.name)
+        ok = is_int(self.count) and self.count > 0
+        require(ok, "count", "a positive integer", self.count)
         put(self, "count", int(self.count))
         if (self.path is None) == (self.goal is None):
             found = "neither" if self.path is None else "both"
-            raise _Problem("", f"expected exactly one of `path` and `goal`, found {found}")
-        put(self, "speed", _range(self.speed, "speed", SPEED_RANGE, "m/s"))
-        put(self, "height", _range(self.height, "height", HEIGHT_RANGE, "m"))
+            raise Problem("", f"expected exactly one of `path` and `goal`, found {found}")
+        put(self, "speed", value_range(self.speed, "speed", SPEED_RANGE, "m/s"))
+        put(self, "height", value_range(self.height, "height", HEIGHT_RANGE, "m"))
         if self.color is not None:
-            rgb = _reals(self.color, "color", "[r, g, b] in [0, 1]", 3)
-            _require(np.all((rgb >= 0) & (rgb <= 1)), "color", "[r, g, b] in [0, 1]", self.color)
+            rgb = reals(self.color, "color", "[r, g, b] in [0, 1]", 3)
+            require(np.all((rgb >= 0) & (rgb <= 1)), "color", "[r, g, b] in [0, 1]", self.color)
             put(self, "color", (float(rgb[0]), float(rgb[1]), float(rgb[2])))
 
 
@@ -303,13 +238,13 @@ class CameraKey:
     target: Float[np.ndarray, " 3"]
 
     def __post_init__(self) -> None:
-        _require(_real(self.time), "time", "a time in seconds", self.time)
+        require(real(self.time), "time", "a time in seconds", self.time)
         object.__setattr__(self, "time", float(self.time))
-        eye = _reals(self.eye, "eye", "[x, y, z] (m)", 3)
-        target = _reals(self.target, "target", "[x, y, z] (m)", 3)
+        eye = reals(self.eye, "eye", "[x, y, z] (m)", 3)
+        target = reals(self.target, "target", "[x, y, z] (m)", 3)
         view = target - eye
         level = math.hypot(view[0], view[2]) > 1e-6 * float(np.linalg.norm(view))
-        _require(level, "target", f"a point off the vertical through eye {_show(eye)}", target)
+        require(level, "target", f"a point off the vertical through eye {show(eye)}", target)
         object.__setattr__(self, "eye", eye)
         object.__setattr__(self, "target", target)
 
@@ -332,19 +267,19 @@ class Camera:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "keys", tuple(self.keys))
-        _require(self.keys, "keys", "at least one camera key", _Raw("none"))
+        require(self.keys, "keys", "at least one camera key", Raw("none"))
         for i in range(1, len(self.keys)):
             t0, t1 = self.keys[i - 1].time, self.keys[i].time
-            _require(t1 > t0, f"keys[{i}].time", f"a time after keys[{i - 1}].time = {t0!r}", t1)
+            require(t1 > t0, f"keys[{i}].time", f"a time after keys[{i - 1}].time = {t0!r}", t1)
         fov = self.fov_deg
-        _require(_real(fov) and 1 <= fov <= 170, "fov", "degrees in [1, 170]", fov)
+        require(real(fov) and 1 <= fov <= 170, "fov", "degrees in [1, 170]", fov)
         for key in ("width", "height"):
             v = getattr(self, key)
-            ok = _is_int(v) and v > 0 and v % 2 == 0
-            _require(ok, key, "a positive even number of pixels", v)
-        _require(_real(self.near) and self.near > 0, "near", "a distance > 0 (m)", self.near)
-        ok = _real(self.far) and self.far > self.near
-        _require(ok, "far", f"a distance > near = {self.near!r} (m)", self.far)
+            ok = is_int(v) and v > 0 and v % 2 == 0
+            require(ok, key, "a positive even number of pixels", v)
+        require(real(self.near) and self.near > 0, "near", "a distance > 0 (m)", self.near)
+        ok = real(self.far) and self.far > self.near
+        require(ok, "far", f"a distance > near = {self.near!r} (m)", self.far)
         for name in ("fov_deg", "near", "far"):
             object.__setattr__(self, name, float(getattr(self, name)))
         object.__setattr__(self, "width", int(self.width))
@@ -380,28 +315,28 @@ class LodSettings:
     def __post_init__(self) -> None:
         put = object.__setattr__
         expected = "increasing distances > 0 (m)"
-        t = _reals(self.thresholds_m, "thresholds", expected)
-        _require(t[0] > 0 and np.all(np.diff(t) > 0), "thresholds", expected, self.thresholds_m)
+        t = reals(self.thresholds_m, "thresholds", expected)
+        require(t[0] > 0 and np.all(np.diff(t) > 0), "thresholds", expected, self.thresholds_m)
         put(self, "thresholds_m", tuple(float(v) for v in t))
         half_gap = float(np.min(np.diff(t, prepend=0.0))) / 2
         h = self.hysteresis_m
         expected = f"metres in [0, {half_gap:g}) (half the smallest gap)"
-        _require(_real(h) and 0 <= h < half_gap, "hysteresis", expected, h)
+        require(real(h) and 0 <= h < half_gap, "hysteresis", expected, h)
         put(self, "hysteresis_m", float(h))
         if self.capacities is not None:
             c = self.capacities
             ok = isinstance(c, list | tuple) and len(c) == self.num_levels
-            ok = ok and all(_is_int(v) and v > 0 for v in c)
-            _require(ok, "capacities", f"{self.num_levels} positive integers (one per level)", c)
+            ok = ok and all(is_int(v) and v > 0 for v in c)
+            require(ok, "capacities", f"{self.num_levels} positive integers (one per level)", c)
             put(self, "capacities", tuple(int(v) for v in c))
         b = self.blend_max_level
-        ok = _is_int(b) and -1 <= b < self.num_levels
-        _require(ok, "blend_max_level", f"an integer in [-1, {self.num_levels - 1}]", b)
+        ok = is_int(b) and -1 <= b < self.num_levels
+        require(ok, "blend_max_level", f"an integer in [-1, {self.num_levels - 1}]", b)
         object.__setattr__(self, "blend_max_level", int(b))
         ok = self.screen in ("distance", "pixels")
-        _require(ok, "importance", '"distance" or "pixels"', self.screen)
+        require(ok, "importance", '"distance" or "pixels"', self.screen)
         m = self.min_pixels
-        _require(_real(m) and 0 <= m, "min_pixels", "a height in pixels >= 0", m)
+        require(real(m) and 0 <= m, "min_pixels", "a height in pixels >= 0", m)
         object.__setattr__(self, "min_pixels", float(m))
 
 
@@ -426,32 +361,32 @@ class Scenario:
         return sum(g.count for g in self.groups)
 
     def __post_init__(self) -> None:
-        _require(_is_int(self.seed) and self.seed >= 0, "seed", "an integer ≥ 0", self.seed)
+        require(is_int(self.seed) and self.seed >= 0, "seed", "an integer ≥ 0", self.seed)
         for key, name in (("duration", "duration_s"), ("fps", "fps")):
             v = getattr(self, name)
-            _require(_real(v) and v > 0, key, "a positive number", v)
+            require(real(v) and v > 0, key, "a positive number", v)
             object.__setattr__(self, name, float(v))
         object.__setattr__(self, "seed", int(self.seed))
-        _require(self.ground.kind == "rect", "ground.shape", '"rect"', self.ground.kind)
+        require(self.ground.kind == "rect", "ground.shape", '"rect"', self.ground.kind)
         object.__setattr__(self, "groups", tuple(self.groups))
-        _require(self.groups, "groups", "at least one [[groups]] table", _Raw("none"))
+        require(self.groups, "groups", "at least one [[groups]] table", Raw("none"))
         lo, hi = self.ground.bounds()
         inside = f"inside the ground (x in [{lo[0]:g}, {hi[0]:g}], z in [{lo[1]:g}, {hi[1]:g}])"
         names: dict[str, int] = {}
         for i, g in enumerate(self.groups):
             used = names.setdefault(g.name, i)
-            _require(used == i, f"groups[{i}].name", f"a name not used by groups[{used}]", g.name)
+            require(used == i, f"groups[{i}].name", f"a name not used by groups[{used}]", g.name)
             for key, region in (("spawn", g.spawn), ("goal", g.goal)):
                 if region is not None:
                     a, b = region.bounds()
                     found = f"one spanning x in [{a[0]:g}, {b[0]:g}], z in [{a[1]:g}, {b[1]:g}]"
                     ok = np.all(a >= lo) and np.all(b <= hi)
-                    _require(ok, f"groups[{i}].{key}", f"a region {inside}", _Raw(found))
+                    require(ok, f"groups[{i}].{key}", f"a region {inside}", Raw(found))
             if g.path is not None:
                 out = ~self.ground.contains(g.path.waypoints)
                 k = int(np.argmax(out))
                 key = f"groups[{i}].path.waypoints[{k}]"
-                _require(not out.any(), key, f"a point {inside}", g.path.waypoints[k])
+                require(not out.any(), key, f"a point {inside}", g.path.waypoints[k])
 
 
 def camera_at(camera: Camera, t: float) -> tuple[Float[np.ndarray, " 3"], Float[np.ndarray, " 3"]]:

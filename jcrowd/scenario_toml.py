@@ -25,9 +25,8 @@ from jcrowd.scenario import (
     Path,
     Region,
     Scenario,
-    _Problem,
-    _show,
 )
+from jcrowd.scenario_check import Problem, show
 
 __all__ = ["load_scenario", "parse_scenario"]
 
@@ -60,14 +59,14 @@ class _Reader:
         """``make(*args, **kwargs)``, its problems reported under the key path ``at``."""
         try:
             return make(*args, **kwargs)
-        except _Problem as p:
+        except Problem as p:
             self.fail(_join(at, p.key), p.detail)
 
     def table(
         self, value: Any, path: str, allowed: Sequence[str], required: Sequence[str] = ()
     ) -> dict[str, Any]:
         if not isinstance(value, dict):
-            self.fail(path, f"expected a table, found {_show(value)}")
+            self.fail(path, f"expected a table, found {show(value)}")
         unknown = sorted(set(value) - set(allowed))
         if unknown:
             self.fail(_join(path, unknown[0]), f"unknown key; allowed keys: {', '.join(allowed)}")
@@ -82,7 +81,7 @@ class _Reader:
         kinds = ("rect",) if ground else tuple(_SHAPES)
         if shape not in kinds:
             expected = '"rect"' if ground else '"rect", "circle" or "polygon"'
-            found = "nothing" if shape is None else _show(shape)
+            found = "nothing" if shape is None else show(shape)
             self.fail(_join(path, "shape"), f"expected {expected}, found {found}")
         keys = _SHAPES[shape]
         self.table(t, path, ("shape", *keys), keys)
@@ -109,7 +108,7 @@ class _Reader:
         if "keys" in t:
             keys = t["keys"]
             if not isinstance(keys, list) or not keys:
-                self.fail("camera.keys", f"expected [[camera.keys]] tables, found {_show(keys)}")
+                self.fail("camera.keys", f"expected [[camera.keys]] tables, found {show(keys)}")
             made = []
             for i, k in enumerate(keys):
                 path = f"camera.keys[{i}]"
@@ -130,13 +129,13 @@ class _Reader:
 
     def model(self, value: Any, base_dir: pathlib.Path) -> str | None:
         if not isinstance(value, str) or not value:
-            self.fail("model", f'expected "default" or a model file path, found {_show(value)}')
+            self.fail("model", f'expected "default" or a model file path, found {show(value)}')
         if value == "default":
             return None
         path = pathlib.Path(value).expanduser()
         path = (path if path.is_absolute() else base_dir / path).resolve()
         if not path.is_file():
-            self.fail("model", f"expected an existing model file, found {_show(value)} (no {path})")
+            self.fail("model", f"expected an existing model file, found {show(value)} (no {path})")
         return str(path)
 
 
@@ -175,7 +174,7 @@ def parse_scenario(
     r.table(doc, "", _TOP, ("duration", "ground", "camera", "groups"))
     groups = doc["groups"]
     if not isinstance(groups, list) or not groups:
-        r.fail("groups", f"expected at least one [[groups]] table, found {_show(groups)}")
+        r.fail("groups", f"expected at least one [[groups]] table, found {show(groups)}")
     lod = r.table(doc.get("lod", {}), "lod", tuple(_LOD))
     base = pathlib.Path(base_dir) if base_dir is not None else pathlib.Path.cwd()
     return r.build(
