@@ -59,7 +59,7 @@ class StepConfig:
             1.1 s cycles end at 30 steps per second, N / 33).
         reach: a waypoint within this distance (m) counts as reached.
         importance: ``"distance"`` (nearer first) or ``"pixels"`` (taller on screen first).
-        min_reliability: below this ρ a clip's controls are pulled towards the nearest sample.
+        min_reliability: below this ρ the next clip is averaged with the nearest sample's clip.
         foot_lock: near levels (≤ ``blend_max_level``) move the root so the stance foot (the
             lowest foot joint) does not slide; the decoded root velocity is used otherwise.
         min_pixels: agents whose projected height is below this are not synthesized (root
