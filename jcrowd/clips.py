@@ -19,9 +19,10 @@ can blend it in over the second half (:mod:`jcrowd.crowd`). The choice, for one 
    would need a second kriging solve per choice; this needs one.
 
 Controls named ``speed`` or ``height`` (if the model has them) take the agent's own values.
-:func:`next_clip` is written for one agent (batched with ``vmap``); :func:`next_clips` is the
-same choice for many agents at once with the kriging in matrix form (one GEMM per operator
-instead of a matrix-vector product per agent; the crowd step's per-step batch).
+:func:`next_clip` is written for one agent (the slow, obvious version: the test oracle);
+:func:`next_clips`, what the crowd step calls, is the same choice for many agents at once with
+the kriging in matrix form (one GEMM per operator instead of a matrix-vector product per agent;
+the crowd step's per-step batch).
 """
 
 from __future__ import annotations

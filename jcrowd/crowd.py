@@ -186,7 +186,7 @@ def init_state(
     n = spawn["position"].shape[0]
     heading = jnp.asarray(spawn["heading"], jnp.float32)
     pos = jnp.asarray(spawn["position"], jnp.float32)
-    # A zero-length "previous cycle" ending where the agent stands: next_clip then plans the
+    # A zero-length "previous cycle" ending where the agent stands: next_clips then plans the
     # first cycle from the spawn pose.
     origin = jnp.concatenate([pos, heading[:, None]], axis=1)
     zero = jnp.zeros((n, cm.lo.shape[0]), jnp.float32)
