@@ -31,7 +31,9 @@ in the frame). Everything has a static shape; no host round trip inside a step.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -43,7 +45,15 @@ from jcrowd.errors import JcrowdError
 from jcrowd.lod import CameraView, assign_buckets, distance_levels, in_frustum, screen_height_px
 from jcrowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
 
-__all__ = ["CrowdState", "Frame", "StepConfig", "default_capacities", "init_state", "step"]
+__all__ = [
+    "CrowdState",
+    "Frame",
+    "StepConfig",
+    "decode_bucket",
+    "default_capacities",
+    "init_state",
+    "step",
+]
 
 
 @dataclass(frozen=True)
@@ -64,6 +74,9 @@ class StepConfig:
             lowest foot joint) does not slide; the decoded root velocity is used otherwise.
         min_pixels: agents whose projected height is below this are not synthesized (root
             only, drawn as dots); 0 synthesizes every agent in the frustum.
+        chunk: a level's bucket is decoded in chunks of at least this many slots (at most 8
+            per level), only as many chunks as hold agents (a capacity is a maximum, not a
+            cost; see :func:`decode_bucket`).
     """
 
     capacities: tuple[int, ...]
@@ -76,6 +89,7 @@ class StepConfig:
     min_reliability: float = 0.5
     foot_lock: bool = True
     min_pixels: float = 3.0
+    chunk: int = 64
 
     def check(self, levels: int) -> None:
         """Raise :class:`JcrowdError` unless the settings fit a model with ``levels`` levels."""
@@ -89,6 +103,8 @@ class StepConfig:
                 f"lod.thresholds: expected {levels - 1} distances for a {levels}-level model, "
                 f"found {list(self.thresholds)}"
             )
+        if self.chunk < 1:
+            raise JcrowdError(f"lod.chunk: expected a positive integer, found {self.chunk}")
         if self.importance not in ("distance", "pixels"):
             raise JcrowdError(
                 f"lod.importance: expected 'distance' or 'pixels', found {self.importance!r}"
@@ -281,6 +297,38 @@ def _agent_level(
     return pts, dtau, dyaw, dpos
 
 
+def decode_bucket(
+    fn: Callable[[Array], Any], slots: Int[Array, " C"], used: Array, chunk: int
+) -> Any:
+    """``fn(slots)`` evaluated only on the chunks of ``chunk`` slots that hold agents.
+
+    ``fn`` maps ``(k,)`` agent ids to a pytree of ``(k, ...)`` arrays (a ``vmap``-ed one-agent
+    function); ``used`` is how many leading slots hold agents (buckets are filled from the
+    front, :class:`jcrowd.lod.Buckets`). The first ``ceil(used / chunk)`` chunks run in a loop
+    with a traced trip count — the shapes stay static, so a changing level histogram compiles
+    nothing — and the rows of chunks not run are zero (their slots are not valid). Measured at
+    100k agents on the bench plaza: levels 1–4 hold ~60–250 agents of their 512–4,096 slots,
+    and decoding every slot cost ~4.6 ms of the step's 17.4.
+    """
+    cap = slots.shape[0]
+    if cap <= chunk:
+        return fn(slots)
+    pad = -cap % chunk
+    ids = jnp.pad(slots, (0, pad))
+    shapes = jax.eval_shape(fn, ids[:chunk])
+    init = jax.tree.map(lambda s: jnp.zeros((cap + pad, *s.shape[1:]), s.dtype), shapes)
+
+    def body(k: Array, out: Any) -> Any:
+        start = k * chunk
+        res = fn(jax.lax.dynamic_slice_in_dim(ids, start, chunk))
+        return jax.tree.map(
+            lambda o, r: jax.lax.dynamic_update_slice_in_dim(o, r, start, 0), out, res
+        )
+
+    out = jax.lax.fori_loop(0, (used + chunk - 1) // chunk, body, init)
+    return jax.tree.map(lambda o: o[:cap], out)
+
+
 def _dead_reckoning(cm: CrowdModel, state: CrowdState, dt: Array) -> tuple[Array, Array, Array]:
     """Root-only advance along the clip's arc at its mean rate (culled agents)."""
     ix, iz, iyaw = cm.index[:3]
@@ -329,7 +377,11 @@ def step(
         def one(i, lv=lv, near=near, lock=lock):
             return _agent_level(cm, lv, near, lock, state, i, dt)
 
-        pts, t_l, yaw_l, pos_l = jax.vmap(one)(safe)
+        used = jnp.sum(ok, dtype=jnp.int32)
+        # At most 8 chunks per level: every chunk pays each of its ops' dispatch once (~2,600
+        # ops per step at 100k on XLA:CPU), so a big level takes bigger chunks.
+        chunk = max(config.chunk, -(-len(slots) // 8))
+        pts, t_l, yaw_l, pos_l = decode_bucket(jax.vmap(one), safe, used, chunk)
         points.append(pts)
         dtau = dtau.at[slots].set(t_l, mode="drop")
         dyaw = dyaw.at[slots].set(yaw_l, mode="drop")

@@ -103,7 +103,9 @@ class Buckets(eqx.Module):
 
     Attributes:
         slots: one ``(C_l,)`` int32 array per level: agent ids, ``N`` in unused slots.
-        valid: one ``(C_l,)`` bool array per level.
+        valid: one ``(C_l,)`` bool array per level; the valid slots are always the leading ones
+            (every branch fills a level from the front), so a consumer may stop at the first
+            invalid slot.
         level: ``(N,)`` int32 final level; ``L`` (one past the last) for agents not placed.
         overflow: agents placed coarser than their distance allowed, because of capacity.
         unplaced: eligible agents that fit in no level (0 when the last capacity covers all).

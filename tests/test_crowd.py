@@ -92,6 +92,38 @@ def test_padded_buckets_equal_unpadded(model):
             np.testing.assert_allclose(p1[i], p2[i], atol=1e-5)
 
 
+@pytest.mark.parametrize(("cap", "used", "chunk"), [(10, 7, 3), (12, 12, 4), (9, 0, 4), (5, 5, 8)])
+def test_decode_bucket_runs_only_the_chunks_that_hold_agents(cap, used, chunk):
+    """Oracle: the whole bucket through ``fn``; chunks past ``used`` are zero, the rest equal."""
+    from jcrowd.crowd import decode_bucket
+
+    slots = jnp.arange(cap, dtype=jnp.int32) * 3 + 1
+    fn = jax.vmap(lambda i: (jnp.sin(i.astype(jnp.float32)), jnp.stack([i, -i])))
+    got = jax.jit(decode_bucket, static_argnums=(0, 3))(fn, slots, jnp.int32(used), chunk)
+    want = fn(slots)
+    run = cap if cap <= chunk else min(cap, -(-used // chunk) * chunk)
+    for g, w in zip(got, want, strict=True):
+        assert g.shape == w.shape
+        np.testing.assert_array_equal(np.asarray(g)[:run], np.asarray(w)[:run])
+        assert not np.any(np.asarray(g)[run:])
+
+
+def test_chunked_step_equals_one_chunk(model):
+    """Decoding buckets in chunks of 2 slots gives the crowd of one chunk per level."""
+    sim, state = _sim(model)
+    whole_state, whole = _run(replace(sim, config=replace(sim.config, chunk=4096)), state, 6)
+    part_state, part = _run(replace(sim, config=replace(sim.config, chunk=2)), state, 6)
+    for a, b in zip(jax.tree.leaves(whole_state), jax.tree.leaves(part_state), strict=True):
+        # Same arithmetic in differently sized vmaps (a few float32 ulps, as above).
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-5)
+    for lv in range(6):
+        ok = np.asarray(whole[-1].valid[lv])
+        np.testing.assert_array_equal(ok, np.asarray(part[-1].valid[lv]))
+        np.testing.assert_allclose(
+            np.asarray(whole[-1].points[lv])[ok], np.asarray(part[-1].points[lv])[ok], atol=1e-5
+        )
+
+
 def test_jit_equals_eager(model):
     sim, state = _sim(model, count=6)
     eager = lambda s, v, dt: step(sim.crowd, sim.config, s, v, dt)  # noqa: E731

@@ -69,6 +69,9 @@ def test_budget_equals_greedy_loop(seed):
     for lv, (slots, ok) in enumerate(zip(b.slots, b.valid, strict=True)):
         ids = np.asarray(slots)[np.asarray(ok)]
         assert sorted(ids.tolist()) == sorted(np.nonzero(want == lv)[0].tolist())
+        # The valid slots lead (decode_bucket stops at the first invalid chunk).
+        used = int(np.sum(ok))
+        assert np.all(np.asarray(ok)[:used]) and not np.any(np.asarray(ok)[used:])
     assert int(b.unplaced) == 0
     assert int(b.overflow) == int(np.sum(eligible & (want > min_level)))
 
