@@ -9,7 +9,8 @@
    capacities by importance. Agents beyond the last capacity become dots too (counted in
    ``overflow``).
 2. **Synthesis** per level (:mod:`jcrowd.synthesis`), ``vmap`` over the level's bucket padded to
-   its capacity: the pose at phase τ, blended with the next clip for levels ≤
+   its capacity, run only on the chunks of slots that hold agents (:func:`decode_bucket`): the
+   pose at phase τ, blended with the next clip for levels ≤
    ``blend_max_level``; FK on the level's skeleton; the root advances by the decoded velocity
    and yaw rate, and τ by ``dt · fps / ΔA(τ)`` (the inverse time-warp, 001 §3.5).
 3. **Culled agents** advance their root only, by dead reckoning along the arc their clip's
