@@ -39,9 +39,10 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Int
 
 from jcrowd.clips import CrowdModel, local_to_world, next_clips
+from jcrowd.crowd_state import CrowdState, Frame, init_state
 from jcrowd.errors import JcrowdError
 from jcrowd.lod import CameraView, assign_buckets, distance_levels, in_frustum, screen_height_px
 from jcrowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
@@ -132,139 +133,6 @@ def default_capacities(agents: int, levels: int) -> tuple[int, ...]:
         min(agents // 2 ** (levels - lv) + 64, BUDGET_FINEST * 2**lv) for lv in range(levels - 1)
     ]
     return tuple(min(agents, c) for c in (*caps, BUDGET_LAST))
-
-
-class CrowdState(eqx.Module):
-    """Every agent's state; leading axis = agents (``N``), ``A`` = mixing-vector length."""
-
-    # Per-agent scalars are kept as separate (N,) arrays, not (N, 2) or (N, 3) rows: XLA:CPU
-    # vectorizes a loop over one contiguous axis, and a fusion writing an (N, 2) result
-    # evaluated its whole expression once per column (dead reckoning: 15 ms of a 1M-agent step).
-    x: Float[Array, " N"]  # root position, m
-    z: Float[Array, " N"]
-    heading: Float[Array, " N"]  # rad; faces (sin, 0, cos)
-    tau: Float[Array, " N"]  # phase in aligned frames, [0, T − 1)
-    # Two clip slots per agent, ``current`` naming the playing one; the next clip is written into
-    # the other, and the hand-over flips ``current`` (no copy of the mixing vectors).
-    control: Float[Array, "N 2 d"]  # clips' controls
-    mix: Float[Array, "N 2 A"]  # clips' mixing vectors [b(c); 1; ĉ]
-    duration: Float[Array, "N 2"]  # clips' durations (model frames)
-    current: Int[Array, " N"]  # 0 or 1
-    has_next: Bool[Array, " N"]
-    origin_x: Float[Array, " N"]  # root position and heading at the current cycle's start
-    origin_z: Float[Array, " N"]
-    origin_heading: Float[Array, " N"]
-    level: Int[Array, " N"]  # last LOD level; L = culled
-    alive: Bool[Array, " N"]
-    height: Float[Array, " N"]  # m (style)
-    speed: Float[Array, " N"]  # m/s (style)
-    waypoints: Float[Array, "N K 2"]
-    num_waypoints: Int[Array, " N"]
-    loop: Bool[Array, " N"]
-    waypoint: Int[Array, " N"]  # index of the waypoint being walked to
-
-    @property
-    def num_agents(self) -> int:
-        return int(self.x.shape[0])
-
-    @property
-    def position(self) -> Float[Array, "N 2"]:
-        """Root positions ``(N, 2)`` as ``(x, z)`` rows (for recorders and tests)."""
-        return jnp.stack([self.x, self.z], axis=1)
-
-    @property
-    def origin(self) -> Float[Array, "N 3"]:
-        """``(x, z, heading)`` rows at each agent's current cycle start."""
-        return jnp.stack([self.origin_x, self.origin_z, self.origin_heading], axis=1)
-
-    def clip(self, which: str = "current") -> tuple[Array, Array, Array]:
-        """``(control (N, d), mix (N, A), duration (N,))`` of the current or the next clip."""
-        # A select, not a gather: XLA:CPU vectorizes it (the gather cost 5x more at 1M agents).
-        first = (self.current == 0) if which == "current" else (self.current == 1)
-        return (
-            jnp.where(first[:, None], self.control[:, 0], self.control[:, 1]),
-            jnp.where(first[:, None], self.mix[:, 0], self.mix[:, 1]),
-            jnp.where(first, self.duration[:, 0], self.duration[:, 1]),
-        )
-
-
-class Frame(eqx.Module):
-    """What a renderer (or a recorder) needs from one step, all with static shapes.
-
-    ``slots[l]`` are agent ids (``N`` in unused slots), ``points[l]`` the world positions of
-    every joint and End Site of those agents ``(C_l, J + E, 3)``. ``level`` is each agent's
-    level (``L``: not synthesized); ``dots`` marks agents in view but not synthesized (below
-    ``min_pixels`` or beyond the budget): a renderer draws them at their root. ``overflow``
-    counts agents placed coarser than their distance allows (dots by budget included),
-    ``deferred`` agents whose next-clip choice waits a step.
-    """
-
-    slots: tuple[Int[Array, " C"], ...]
-    valid: tuple[Bool[Array, " C"], ...]
-    points: tuple[Float[Array, "C P 3"], ...]
-    level: Int[Array, " N"]
-    dots: Bool[Array, " N"]
-    overflow: Int[Array, ""]
-    deferred: Int[Array, ""]
-
-
-def init_state(
-    cm: CrowdModel, spawn: dict[str, Array], key: Array, min_reliability: float = 0.5
-) -> CrowdState:
-    """The first state: every agent on its first clip at a random phase (``key``).
-
-    ``spawn`` holds ``position (N, 2)``, ``heading``, ``height``, ``speed`` ``(N,)``,
-    ``waypoints (N, K, 2)``, ``num_waypoints (N,)``, ``loop (N,)``.
-    """
-    n = spawn["position"].shape[0]
-    heading = jnp.asarray(spawn["heading"], jnp.float32)
-    pos = jnp.asarray(spawn["position"], jnp.float32)
-    # A zero-length "previous cycle" ending where the agent stands: next_clips then plans the
-    # first cycle from the spawn pose.
-    origin = jnp.concatenate([pos, heading[:, None]], axis=1)
-    zero = jnp.zeros((n, cm.lo.shape[0]), jnp.float32)
-    waypoints = jnp.asarray(spawn["waypoints"], jnp.float32)
-    target = waypoints[:, 0]
-    height = jnp.asarray(spawn["height"], jnp.float32)
-    speed = jnp.asarray(spawn["speed"], jnp.float32)
-    c, a, dur = _first_clips(cm, origin, zero, target, speed, height, min_reliability)
-    tau = jax.random.uniform(key, (n,), jnp.float32, 0.0, float(cm.frames - 1) / 2)
-    return CrowdState(
-        x=pos[:, 0],
-        z=pos[:, 1],
-        heading=heading,
-        tau=tau,
-        control=jnp.stack([c, c], axis=1),
-        mix=jnp.stack([a, a], axis=1),
-        duration=jnp.stack([dur, dur], axis=1),
-        current=jnp.zeros(n, jnp.int32),
-        has_next=jnp.zeros(n, bool),
-        # Copies: a donated state must not hold one buffer in two fields.
-        origin_x=jnp.copy(pos[:, 0]),
-        origin_z=jnp.copy(pos[:, 1]),
-        origin_heading=jnp.copy(heading),
-        level=jnp.zeros(n, jnp.int32),
-        alive=jnp.ones(n, bool),
-        height=height,
-        speed=speed,
-        waypoints=waypoints,
-        num_waypoints=jnp.asarray(spawn["num_waypoints"], jnp.int32),
-        loop=jnp.asarray(spawn["loop"], bool),
-        waypoint=jnp.zeros(n, jnp.int32),
-    )
-
-
-@eqx.filter_jit
-def _first_clips(
-    cm: CrowdModel,
-    origin: Array,
-    control: Array,
-    target: Array,
-    speed: Array,
-    height: Array,
-    min_reliability: float,
-) -> tuple[Array, Array, Array]:
-    return next_clips(cm, origin, control, target, speed, height, min_reliability)
 
 
 def _smoothstep(x: Array) -> Array:
