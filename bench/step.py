@@ -11,7 +11,8 @@ In the same run, on the same agents:
 - **naive interpolation** (paper 000's comparison): every agent-frame blends all S aligned
   samples with its kriging weights (the samples as stored full-size ``(S, T, P)`` pose vectors,
   reconstructed from the model), full skeleton FK, no tensor, no LOD;
-- **full detail**: the level-0 decode + FK for every agent (agent-frames/s);
+- **full detail**: the level-0 decode + FK for every agent (agent-frames/s), in the chunks the
+  step would use for a level of that many slots;
 - **roof**: bytes the step must move divided by the bandwidth of a large copy measured in this
   process: every agent's per-step fields read and written (all of the state but the clips'
   mixing vectors and the waypoint lists, of which one row is read), plus, per synthesized slot,
@@ -40,6 +41,7 @@ import numpy as np
 from common import machine, report
 
 from jcrowd import load_default_model
+from jcrowd.crowd import bucket_chunk, decode_bucket
 from jcrowd.model import MotionModel
 from jcrowd.posevec import PoseLayout
 from jcrowd.rotation import quat_from_expmap, quat_mul, yaw_quat
@@ -138,17 +140,23 @@ def naive_ms(model: MotionModel, n: int, repeats: int) -> float:
 
 
 def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
-    """Agent-frames/s of level-0 decode + FK for ``n`` agents (every agent at full detail)."""
+    """Agent-frames/s of level-0 decode + FK for ``n`` agents (every agent at full detail),
+    decoded as the step decodes a bucket: in chunks (:func:`jcrowd.crowd.decode_bucket`; one
+    vmap over 100k agents materializes 480 MB of cores and runs memory-bound)."""
     lv = sim.crowd.decoders.levels[0]
+    mix, tau = state.clip()[1][:n], state.tau[:n]
+    xz, h, hd = state.position[:n], state.height[:n], state.heading[:n]
 
-    def one(a: jax.Array, tau: jax.Array, xz: jax.Array, h: jax.Array, hd: jax.Array) -> Any:
-        return level_points(lv, pose_from_coeffs(lv, decode_coeffs(lv, a, tau)), xz, hd, h)
+    def one(i: jax.Array) -> Any:
+        return level_points(
+            lv, pose_from_coeffs(lv, decode_coeffs(lv, mix[i], tau[i])), xz[i], hd[i], h[i]
+        )
 
-    f = jax.jit(jax.vmap(one))
-    args = (state.clip()[1], state.tau, state.position, state.height, state.heading)
-    args = tuple(x[:n] for x in args)
-    jax.block_until_ready(f(*args))
-    return n / (_median_ms(lambda: f(*args), repeats) * 1e-3)
+    ids = jnp.arange(n, dtype=jnp.int32)
+    chunk = bucket_chunk(n, sim.config.chunk)  # as the step would for a level of n slots
+    f = jax.jit(lambda ids: decode_bucket(jax.vmap(one), ids, jnp.int32(n), chunk))
+    jax.block_until_ready(f(ids))
+    return n / (_median_ms(lambda: f(ids), repeats) * 1e-3)
 
 
 def roof_bytes(state: Any, frame: Any, refresh: int) -> int:
