@@ -17,8 +17,10 @@
    controls ``(dx, dz, dyaw)`` describe, at the clip's mean rate (000 §4.3: "only the position
    and orientation of the root node are computed ... in an invisible area").
 4. **Clips** (:mod:`jcrowd.clips`): an agent passing the middle of its cycle chooses the next
-   (at most ``refresh`` agents per step; the rest wait a step and are counted); at the cycle's
-   end the next clip takes over.
+   (at most ``refresh`` agents per step, of which at most ``krige_budget`` synthesized ones get
+   a kriged clip; the rest wait a step and are counted). Agents not synthesized this step get
+   the nearest captured cycle to the controls they aim at, without a kriging solve
+   (:func:`jcrowd.clips.next_clips_lod`). At the cycle's end the next clip takes over.
 
 Blending reading (000 §5 "blending the second half of the synthesized motion with the first
 half of the following motion"): the paper's clips are two strides, ours one gait cycle, so the
@@ -39,9 +41,9 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Int
+from jaxtyping import Array, Bool, Int
 
-from jcrowd.clips import CrowdModel, local_to_world, next_clips
+from jcrowd.clips import CrowdModel, local_to_world, next_clips_lod
 from jcrowd.crowd_state import CrowdState, Frame, init_state
 from jcrowd.errors import JcrowdError
 from jcrowd.lod import CameraView, assign_buckets, distance_levels, in_frustum, screen_height_px
@@ -80,6 +82,9 @@ class StepConfig:
         chunk: a level's bucket is decoded in chunks of at least this many slots (at most 8
             per level), only as many chunks as hold agents (a capacity is a maximum, not a
             cost; see :func:`decode_bucket`).
+        krige_budget: next clips kriged per step at most, for agents being synthesized (0:
+            ``Σ capacities / 32 + 64``, twice the rate at which ~1.1 s cycles end for a full
+            budget); the others play the nearest captured cycle (:func:`next_clips_lod`).
     """
 
     capacities: tuple[int, ...]
@@ -93,6 +98,7 @@ class StepConfig:
     foot_lock: bool = True
     min_pixels: float = 3.0
     chunk: int = 64
+    krige_budget: int = 0
 
     def check(self, levels: int) -> None:
         """Raise :class:`JcrowdError` unless the settings fit a model with ``levels`` levels."""
@@ -287,7 +293,7 @@ def step(
         jnp.where(alive, state.tau + dtau, state.tau),
     )
     state = eqx.tree_at(lambda s: (s.x, s.z, s.heading, s.tau), state, moved)
-    state, deferred = _schedule(cm, config, state)
+    state, deferred = _schedule(cm, config, state, buckets.level < nlev)
     state = eqx.tree_at(lambda s: s.level, state, buckets.level)
     frame = Frame(
         buckets.slots,
@@ -319,8 +325,14 @@ def _waypoint_xz(state: CrowdState, wp: Int[Array, " N"]) -> tuple[Array, Array]
     return tx, tz
 
 
-def _schedule(cm: CrowdModel, config: StepConfig, state: CrowdState) -> tuple[CrowdState, Array]:
-    """Waypoints, next-clip choice at mid-cycle (bounded per step) and clip hand-over."""
+def _schedule(
+    cm: CrowdModel, config: StepConfig, state: CrowdState, synthesized: Bool[Array, " N"]
+) -> tuple[CrowdState, Array]:
+    """Waypoints, next-clip choice at mid-cycle (bounded per step) and clip hand-over.
+
+    Agents synthesized this step get a kriged next clip, the others the nearest captured cycle
+    to the controls they aim at (:func:`jcrowd.clips.next_clips_lod`).
+    """
     n = state.num_agents
     last = float(cm.frames - 1)
     tx, tz = _waypoint_xz(state, state.waypoint)
@@ -337,7 +349,8 @@ def _schedule(cm: CrowdModel, config: StepConfig, state: CrowdState) -> tuple[Cr
     origin = jnp.stack(
         [state.origin_x[safe], state.origin_z[safe], state.origin_heading[safe]], axis=1
     )
-    c, a, dur = next_clips(
+    budget = config.krige_budget or sum(config.capacities) // 32 + 64
+    c, a, dur, done = next_clips_lod(
         cm,
         origin,
         state.control[safe, state.current[safe]],
@@ -345,7 +358,10 @@ def _schedule(cm: CrowdModel, config: StepConfig, state: CrowdState) -> tuple[Cr
         state.speed[safe],
         state.height[safe],
         config.min_reliability,
+        synthesized[safe] & (idx < n),
+        budget,
     )
+    idx = jnp.where(done, idx, n)  # choices beyond the kriging budget wait a step
     slot = 1 - state.current[safe]
     control = state.control.at[idx, slot].set(c, mode="drop")
     mix = state.mix.at[idx, slot].set(a, mode="drop")

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from jcrowd import load_default_model
-from jcrowd.clips import build_crowd_model, next_clip, next_clips
+from jcrowd.clips import build_crowd_model, next_clip, next_clips, next_clips_lod
 from jcrowd.kriging.universal import kriging_weights, reliability_one, weights_and_reliability
+from jcrowd.synthesis import clip_weights
 
 
 @pytest.fixture(scope="module")
@@ -56,3 +57,45 @@ def test_next_clips_equals_vmapped_next_clip(cm, min_reliability):
     np.testing.assert_allclose(np.asarray(a), np.asarray(a1), atol=1e-4)
     np.testing.assert_allclose(np.asarray(dur), np.asarray(dur1), atol=1e-2)
     assert np.isfinite(np.asarray(a)).all()
+
+
+def test_next_clips_lod_krige_rows_are_kriged_and_the_rest_play_the_nearest_sample(cm):
+    """Oracle per row: kriged rows are next_clip's choice; the others keep the aimed controls
+    (next_clip with no reliability pull) and the nearest sample's own mixing vector."""
+    m = 40
+    args = _agents(cm, m, seed=7)
+    krige = jnp.asarray(np.arange(m) % 3 == 0)
+    lod = jax.jit(next_clips_lod, static_argnums=(6, 8))
+    c, a, dur, done = lod(cm, *args, 0.5, krige, m)
+    assert np.asarray(done).all()
+    kriged = jax.vmap(lambda *x: next_clip(cm, *x, 0.5))(*args)
+    aimed = jax.vmap(lambda *x: next_clip(cm, *x, -1e9))(*args)[0]  # ρ ≥ -1e9: no pull
+    k = cm.decoders.kriging
+    scale = np.asarray(k.control_scale)
+    samples = np.asarray(cm.sample_controls)
+    for i in range(m):
+        if krige[i]:
+            # Same tolerances as the matrix-form test above.
+            np.testing.assert_allclose(np.asarray(c[i]), np.asarray(kriged[0][i]), atol=1e-5)
+            np.testing.assert_allclose(np.asarray(a[i]), np.asarray(kriged[1][i]), atol=1e-4)
+            continue
+        np.testing.assert_allclose(np.asarray(c[i]), np.asarray(aimed[i]), atol=1e-5)
+        near = int(np.argmin((((samples - np.asarray(c[i])) / scale) ** 2).sum(axis=1)))
+        want = clip_weights(cm.decoders, cm.sample_controls[near])  # one-hot at a sample
+        np.testing.assert_allclose(np.asarray(a[i]), np.asarray(want), atol=1e-4)
+        assert np.asarray(a[i, : k.num_samples]).max() == 1.0
+        assert float(dur[i]) == pytest.approx(float(jnp.dot(want, cm.duration)), abs=1e-2)
+
+
+def test_next_clips_lod_beyond_the_budget_waits(cm):
+    args = _agents(cm, 6, seed=3)
+    krige = jnp.asarray([False, True, True, False, True, True])
+    lod = jax.jit(next_clips_lod, static_argnums=(6, 8))
+    _, _, _, done = lod(cm, *args, 0.5, krige, 2)
+    # The first two kriged rows fit; the rows not kriged never wait.
+    np.testing.assert_array_equal(np.asarray(done), [True, True, True, True, False, False])
+    c_all, a_all, _, done_all = lod(cm, *args, 0.5, jnp.ones(6, bool), 6)
+    c, a, _ = next_clips(cm, *args, 0.5)
+    assert np.asarray(done_all).all()
+    np.testing.assert_allclose(np.asarray(c_all), np.asarray(c), atol=1e-6)
+    np.testing.assert_allclose(np.asarray(a_all), np.asarray(a), atol=1e-6)

@@ -353,3 +353,39 @@ def test_agents_beyond_the_budget_become_dots_and_count_as_overflow(model):
     visible = sum(int(np.asarray(v).sum()) for v in all_in.valid)
     assert placed == 6 and visible > 6  # one per level; the rest of those in view are dots
     assert dots == visible - placed and int(frame.overflow) >= dots
+
+
+def _one_hot_rows(mix, samples):
+    b = mix[:, :samples]
+    return np.isclose(b.max(axis=1), 1.0, atol=1e-6) & np.all(
+        np.isclose(np.sort(b, axis=1)[:, :-1], 0.0, atol=1e-6), axis=1
+    )
+
+
+def test_next_clip_is_kriged_for_synthesized_agents_and_captured_for_the_rest(model):
+    """Agents not synthesized choose the nearest captured cycle (one-hot weights); agents
+    synthesized get the kriged clip (dense weights)."""
+    for min_pixels, want_one_hot in ((1e9, True), (3.0, False)):
+        sim, state = _sim(model, min_pixels=min_pixels)
+        s = sim.crowd.decoders.kriging.num_samples
+        state, frames = _run(sim, state, 40)
+        synthesized = np.asarray(frames[-1].level) < len(sim.config.capacities)
+        assert synthesized.any() != want_one_hot  # the near scene: all 24 in view and tall
+        chosen = np.asarray(state.has_next)
+        assert chosen.sum() >= 3
+        nxt = np.asarray(state.clip("next")[1])[chosen]
+        assert np.all(_one_hot_rows(nxt, s) == want_one_hot)
+
+
+def test_kriging_budget_defers_choices_and_counts_them(model):
+    sim, state = _sim(model, krige_budget=1)
+    fn = sim.compiled(donate=False)
+    before = np.asarray(state.has_next)
+    deferred = 0
+    for i in range(40):
+        state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
+        after = np.asarray(state.has_next)
+        assert int(np.sum(after & ~before)) <= 1  # at most one kriged choice per step
+        before = after
+        deferred += int(frame.deferred)
+    assert deferred > 0
