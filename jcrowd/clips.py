@@ -64,6 +64,8 @@ class CrowdModel(eqx.Module):
         duration: ``(A,)`` cycle duration in model frames as a linear function of a clip's
             mixing vector (Σ ΔA over the aligned frames, 001 §3.5).
         cycle_seconds: the samples' median cycle duration (s).
+        shortest_cycle_seconds: the samples' shortest cycle duration (s): at most one cycle per
+            agent ends in this long, which bounds the clip choices a step must make.
         index: static positions of ``dx, dz, dyaw, speed, height`` in the controls (-1: absent).
         feet: left ankle, left toe, right ankle, right toe joints (for foot locking).
     """
@@ -74,6 +76,7 @@ class CrowdModel(eqx.Module):
     sample_controls: Float[Array, "S d"]
     duration: Float[Array, " A"]
     cycle_seconds: float = eqx.field(static=True)
+    shortest_cycle_seconds: float = eqx.field(static=True)
     index: tuple[int, int, int, int, int] = eqx.field(static=True)
     feet: tuple[int, int, int, int] = eqx.field(static=True)
 
@@ -114,6 +117,7 @@ def build_crowd_model(model: MotionModel) -> CrowdModel:
         jnp.asarray(samples, jnp.float32),
         jnp.asarray(duration, jnp.float32),
         cycle_seconds,
+        float(np.min(per_sample) / model.fps),
         index,  # type: ignore[arg-type]
         (feet.left_ankle, feet.left_toe, feet.right_ankle, feet.right_toe),
     )

@@ -71,7 +71,8 @@ class StepConfig:
         hysteresis: band (m) round each threshold inside which the level does not change.
         blend_max_level: levels ≤ this blend clips; coarser ones switch at the frame.
         refresh: clips chosen per step at most (0: ``N / 32 + 64``, above the rate at which
-            1.1 s cycles end at 30 steps per second, N / 33).
+            1.1 s cycles end at 30 steps per second, N / 33; :func:`jcrowd.simulate.prepare`
+            sets it from the frame rate and the model's shortest cycle).
         reach: a waypoint within this distance (m) counts as reached.
         importance: ``"distance"`` (nearer first) or ``"pixels"`` (taller on screen first).
         min_reliability: below this ρ the next clip is averaged with the nearest sample's clip.
@@ -83,8 +84,9 @@ class StepConfig:
             per level), only as many chunks as hold agents (a capacity is a maximum, not a
             cost; see :func:`decode_bucket`).
         krige_budget: next clips kriged per step at most, for agents being synthesized (0:
-            ``Σ capacities / 32 + 64``, twice the rate at which ~1.1 s cycles end for a full
-            budget); the others play the nearest captured cycle (:func:`next_clips_lod`).
+            ``Σ capacities / 32 + 64``; ``prepare`` sets it like ``refresh`` for the agents
+            the capacities hold); the others play the nearest captured cycle
+            (:func:`jcrowd.clips.next_clips_lod`).
     """
 
     capacities: tuple[int, ...]

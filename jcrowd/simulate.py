@@ -15,6 +15,7 @@ distance thresholds.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -102,8 +103,15 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
             f"the model), found {list(lod.capacities)}"
         )
     caps = lod.capacities if lod.capacities is not None else default_capacities(agents, levels)
+    caps = tuple(min(int(c), agents) for c in caps)
+    # Clip choices per step: every agent ends at most one cycle per shortest cycle, so
+    # N / (fps · shortest cycle) choices per step keep up with any mix of clips (+64 slack);
+    # the kriged ones are bounded by the agents that can be synthesized at once.
+    steps_per_cycle = scenario.fps * crowd.shortest_cycle_seconds
     config = StepConfig(
-        capacities=tuple(min(int(c), agents) for c in caps),
+        capacities=caps,
+        refresh=min(agents, math.ceil(agents / steps_per_cycle) + 64),
+        krige_budget=math.ceil(sum(caps) / steps_per_cycle) + 64,
         thresholds=thresholds_for(lod.thresholds_m, levels),
         hysteresis=lod.hysteresis_m,
         blend_max_level=lod.blend_max_level,

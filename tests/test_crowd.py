@@ -79,8 +79,8 @@ def test_padded_buckets_equal_unpadded(model):
     roomy_state, roomy_frames = _run(sim2, state, 8)
     for a, b in zip(jax.tree.leaves(tight_state), jax.tree.leaves(roomy_state), strict=True):
         # Same per-agent arithmetic in a differently sized vmap: XLA may vectorise the tails
-        # differently, a few float32 ulps of metre-sized values.
-        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-5)
+        # differently, a few float32 ulps of values up to ~60 m (ulp 3.8–7.6 µm): 3e-5.
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=3e-5)
     for lv in range(6):
         f1, f2 = tight[-1], roomy_frames[-1]
         ids1 = np.asarray(f1.slots[lv])[np.asarray(f1.valid[lv])]
@@ -115,7 +115,7 @@ def test_chunked_step_equals_one_chunk(model):
     part_state, part = _run(replace(sim, config=replace(sim.config, chunk=2)), state, 6)
     for a, b in zip(jax.tree.leaves(whole_state), jax.tree.leaves(part_state), strict=True):
         # Same arithmetic in differently sized vmaps (a few float32 ulps, as above).
-        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-5)
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=3e-5)
     for lv in range(6):
         ok = np.asarray(whole[-1].valid[lv])
         np.testing.assert_array_equal(ok, np.asarray(part[-1].valid[lv]))
@@ -141,10 +141,11 @@ def test_frame_points_equal_direct_decode(model):
     _, frames = _run(sim, state, 1)
     frame = frames[0]
     slots, ok = np.asarray(frame.slots[0]), np.asarray(frame.valid[0])
-    assert ok.any()
-    i = int(slots[ok][0])
+    plain = ok & ~np.asarray(state.has_next)[np.minimum(slots, state.num_agents - 1)]
+    assert plain.any()  # an agent not blending yet: its pose is its current clip's alone
+    i = int(slots[plain][0])
     lv = sim.crowd.decoders.levels[0]
-    g = decode_coeffs(lv, state.clip()[1][i], state.tau[i])  # has_next is False at t = 0
+    g = decode_coeffs(lv, state.clip()[1][i], state.tau[i])
     y = pose_from_coeffs(lv, g)
     want = level_points(lv, y, state.position[i], state.heading[i], state.height[i])
     got = np.asarray(frame.points[0])[np.nonzero(slots == i)[0][0]]
@@ -389,3 +390,15 @@ def test_kriging_budget_defers_choices_and_counts_them(model):
         before = after
         deferred += int(frame.deferred)
     assert deferred > 0
+
+
+def test_first_state_spreads_phases_and_no_choice_waits(model):
+    """Phases cover the whole cycle, agents past its middle start with their next clip, and
+    the step's default choice budget keeps up: no choice is deferred."""
+    sim, state = _sim(model, count=400)
+    last = sim.crowd.frames - 1
+    tau = np.asarray(state.tau)
+    assert tau.min() < 0.1 * last and tau.max() > 0.9 * last
+    np.testing.assert_array_equal(np.asarray(state.has_next), tau >= last / 2)
+    _, frames = _run(sim, state, 45)
+    assert sum(int(f.deferred) for f in frames) == 0
