@@ -402,3 +402,28 @@ def test_first_state_spreads_phases_and_no_choice_waits(model):
     np.testing.assert_array_equal(np.asarray(state.has_next), tau >= last / 2)
     _, frames = _run(sim, state, 45)
     assert sum(int(f.deferred) for f in frames) == 0
+
+
+def test_step_compiles_without_state_copies_and_same_results(model):
+    """With copy insertion's region analysis (CPU), the compiled step copies no donated state
+    buffer, and the crowd is bit-for-bit the one compiled without the option."""
+    from jcrowd.simulate import step_compiler_options
+
+    if not step_compiler_options():
+        pytest.skip("this XLA has no xla_cpu_copy_insertion_use_region_analysis option")
+    sim, state = _sim(model)
+
+    def run(state, view, dt):  # the argument name fixes the HLO parameter names
+        return step(sim.crowd, sim.config, state, view, dt)
+
+    fn = sim.compiled()
+    plain = jax.jit(run, donate_argnums=(0,))
+    view, dt = sim.view_at(0.0), sim.dt
+    assert "copy(%state_" not in fn.lower(state, view, dt).compile().as_text()
+    assert "copy(%state_" in plain.lower(state, view, dt).compile().as_text()  # can fail
+    a, b = jax.tree.map(jnp.copy, state), jax.tree.map(jnp.copy, state)
+    for i in range(5):
+        a, _ = fn(a, sim.view_at(i * sim.dt), dt)
+        b, _ = plain(b, sim.view_at(i * sim.dt), dt)
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
