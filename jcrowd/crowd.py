@@ -144,25 +144,70 @@ def default_capacities(agents: int, levels: int) -> tuple[int, ...]:
     return tuple(min(agents, c) for c in (*caps, BUDGET_LAST))
 
 
+def _refresh_far_cores(
+    cm: CrowdModel, state: CrowdState, safe: Int[Array, " C"], ok: Bool[Array, " C"]
+) -> CrowdState:
+    """Compute the coarsest-level core of each agent in the bucket whose cached one is stale.
+
+    Stale: never computed, or the agent's clip changed since (the hand-over clears
+    ``far_valid``). The issue's design — keep the clip, recompute its core only when the clip
+    changes — for the level holding most synthesized agents (~13,000 of them on the bench
+    plaza, whose 77 × 49 core product per agent-frame cost 1.2 ms of a 100k step). Usually few
+    are stale per step (an agent changes clip once per cycle), so at most an eighth of the
+    bucket + 16 is compacted and computed; when more are (the first step, a camera cut) the
+    whole bucket is — one branch runs, and either way every agent of the bucket leaves valid.
+    The scatter into the ``(N, R)`` cache stays outside the branch so the cache is updated in
+    place. Interleaved runs: 100k 16.6–17.0 → 16.0–16.1 ms, 1M 91–95 → 85–88 ms.
+    """
+    lv = cm.decoders.levels[-1]
+    n, cap = state.num_agents, safe.shape[0]
+    budget = min(cap, cap // 8 + 16)
+    stale = ok & ~state.far_valid[safe]
+    cores_of = jax.vmap(lambda i: clip_core(lv, state.mix[i, state.current[i]]).reshape(-1))
+
+    def some() -> tuple[Array, Array]:
+        (k,) = jnp.nonzero(stale, size=budget, fill_value=cap)
+        ids = jnp.where(k < cap, safe[jnp.minimum(k, cap - 1)], n)
+        cores = cores_of(jnp.minimum(ids, n - 1))
+        pad = cap - budget
+        return jnp.pad(ids, (0, pad), constant_values=n), jnp.pad(cores, ((0, pad), (0, 0)))
+
+    def every() -> tuple[Array, Array]:
+        return jnp.where(ok, safe, n), cores_of(safe)
+
+    ids, cores = jax.lax.cond(jnp.sum(stale) <= budget, some, every)
+    far_core = state.far_core.at[ids].set(cores, mode="drop")
+    far_valid = state.far_valid.at[jnp.where(ok, safe, n)].set(True, mode="drop")
+    return eqx.tree_at(lambda s: (s.far_core, s.far_valid), state, (far_core, far_valid))
+
+
 def _smoothstep(x: Array) -> Array:
     x = jnp.clip(x, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
 
 
 def _agent_level(
-    cm: CrowdModel, level: int, near: bool, lock: bool, state: CrowdState, i: Array, dt: Array
+    cm: CrowdModel,
+    level: int,
+    near: bool,
+    lock: bool,
+    state: CrowdState,
+    i: Array,
+    dt: Array,
+    cached: bool = False,
 ):
     """Pose and root motion of agent ``i`` at ``level`` (one agent; batched by ``vmap``).
 
     ``near``: blend into the next clip over the cycle's second half. ``lock``: move the root so
-    that the stance foot stays put (see :func:`step`).
+    that the stance foot stays put (see :func:`step`). ``cached``: the core is the agent's
+    ``far_core`` (the coarsest level, kept current by :func:`_refresh_far_cores`).
     """
     lv = cm.decoders.levels[level]
     last = float(cm.frames - 1)
     k = state.current[i]
 
     # The clips' cores are computed once and evaluated at both phases the foot lock needs.
-    core = clip_core(lv, state.mix[i, k])
+    core = state.far_core[i].reshape(lv.ranks) if cached else clip_core(lv, state.mix[i, k])
     core_next = clip_core(lv, state.mix[i, 1 - k]) if near else core
 
     def pose(tau: Array) -> Array:
@@ -275,8 +320,12 @@ def step(
         near = lv <= config.blend_max_level
         lock = near and config.foot_lock
 
-        def one(i, lv=lv, near=near, lock=lock):
-            return _agent_level(cm, lv, near, lock, state, i, dt)
+        cached = lv == nlev - 1 and not near
+        if cached:
+            state = _refresh_far_cores(cm, state, safe, ok)
+
+        def one(i, lv=lv, near=near, lock=lock, cached=cached, state=state):
+            return _agent_level(cm, lv, near, lock, state, i, dt, cached)
 
         used = jnp.sum(ok, dtype=jnp.int32)
         chunk = bucket_chunk(len(slots), config.chunk)
@@ -388,6 +437,8 @@ def _schedule(
             origin_z=jnp.where(wrap, state.z, state.origin_z),
             origin_heading=jnp.where(wrap, state.heading, state.origin_heading),
             level=state.level,
+            far_core=state.far_core,
+            far_valid=state.far_valid & ~take,
             alive=alive,
             height=state.height,
             speed=state.speed,

@@ -10,6 +10,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from jcrowd.clips import CrowdModel, next_clips
@@ -38,6 +39,10 @@ class CrowdState(eqx.Module):
     origin_z: Float[Array, " N"]
     origin_heading: Float[Array, " N"]
     level: Int[Array, " N"]  # last LOD level; L = culled
+    # The current clip's core at the coarsest level, kept while the clip plays: recomputed
+    # only when the clip changes (jcrowd.crowd._refresh_far_cores), not every step.
+    far_core: Float[Array, "N RR"]
+    far_valid: Bool[Array, " N"]
     alive: Bool[Array, " N"]
     height: Float[Array, " N"]  # m (style)
     speed: Float[Array, " N"]  # m/s (style)
@@ -136,6 +141,8 @@ def init_state(
         origin_z=jnp.copy(pos[:, 1]),
         origin_heading=jnp.copy(heading),
         level=jnp.zeros(n, jnp.int32),
+        far_core=jnp.zeros((n, int(np.prod(cm.decoders.levels[-1].ranks))), jnp.float32),
+        far_valid=jnp.zeros(n, bool),
         alive=jnp.ones(n, bool),
         height=height,
         speed=speed,
