@@ -15,7 +15,8 @@ In the same run, on the same agents:
   step would use for a level of that many slots;
 - **roof**: bytes the step must move divided by the bandwidth of a large copy measured in this
   process: every agent's per-step fields read and written (all of the state but the clips'
-  mixing vectors and the waypoint lists, of which one row is read), plus, per synthesized slot,
+  mixing vectors, the waypoint lists and the cached coarsest-level cores, of which only the
+  rows a step uses are read), plus, per synthesized slot,
   its two mixing vectors read and its drawn points written, plus the next-clip rows written.
   (With the state donated, untouched buffers are not copied: the count is what a step needs.)
 
@@ -162,11 +163,13 @@ def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
 def roof_bytes(state: Any, frame: Any, refresh: int) -> int:
     """Bytes a step must read and write (module doc)."""
     n = state.num_agents
-    per_step = sum(x.nbytes for k, x in vars(state).items() if k not in ("mix", "waypoints"))
+    rowwise = ("mix", "waypoints", "far_core")  # touched only in the rows a step uses
+    per_step = sum(x.nbytes for k, x in vars(state).items() if k not in rowwise)
     mix_row = state.mix.nbytes // n  # both clip slots of one agent
     slots = sum(int(p.shape[0]) for p in frame.points)
     points = sum(int(np.prod(p.shape)) * 4 for p in frame.points)
-    return 2 * per_step + n * 8 + slots * mix_row + points + refresh * mix_row // 2
+    far = int(frame.points[-1].shape[0]) * (state.far_core.nbytes // n)  # cached cores read
+    return 2 * per_step + n * 8 + slots * mix_row + points + refresh * mix_row // 2 + far
 
 
 def run_count(

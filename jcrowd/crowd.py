@@ -44,7 +44,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Int
 
 from jcrowd.clips import CrowdModel, local_to_world, next_clips_lod
-from jcrowd.crowd_state import CrowdState, Frame, init_state
+from jcrowd.crowd_state import CrowdState, Frame, init_state, refresh_far_cores
 from jcrowd.errors import JcrowdError
 from jcrowd.lod import CameraView, assign_buckets, distance_levels, in_frustum, screen_height_px
 from jcrowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
@@ -144,43 +144,6 @@ def default_capacities(agents: int, levels: int) -> tuple[int, ...]:
     return tuple(min(agents, c) for c in (*caps, BUDGET_LAST))
 
 
-def _refresh_far_cores(
-    cm: CrowdModel, state: CrowdState, safe: Int[Array, " C"], ok: Bool[Array, " C"]
-) -> CrowdState:
-    """Compute the coarsest-level core of each agent in the bucket whose cached one is stale.
-
-    Stale: never computed, or the agent's clip changed since (the hand-over clears
-    ``far_valid``). The issue's design — keep the clip, recompute its core only when the clip
-    changes — for the level holding most synthesized agents (~13,000 of them on the bench
-    plaza, whose 77 × 49 core product per agent-frame cost 1.2 ms of a 100k step). Usually few
-    are stale per step (an agent changes clip once per cycle), so at most an eighth of the
-    bucket + 16 is compacted and computed; when more are (the first step, a camera cut) the
-    whole bucket is — one branch runs, and either way every agent of the bucket leaves valid.
-    The scatter into the ``(N, R)`` cache stays outside the branch so the cache is updated in
-    place. Interleaved runs: 100k 16.6–17.0 → 16.0–16.1 ms, 1M 91–95 → 85–88 ms.
-    """
-    lv = cm.decoders.levels[-1]
-    n, cap = state.num_agents, safe.shape[0]
-    budget = min(cap, cap // 8 + 16)
-    stale = ok & ~state.far_valid[safe]
-    cores_of = jax.vmap(lambda i: clip_core(lv, state.mix[i, state.current[i]]).reshape(-1))
-
-    def some() -> tuple[Array, Array]:
-        (k,) = jnp.nonzero(stale, size=budget, fill_value=cap)
-        ids = jnp.where(k < cap, safe[jnp.minimum(k, cap - 1)], n)
-        cores = cores_of(jnp.minimum(ids, n - 1))
-        pad = cap - budget
-        return jnp.pad(ids, (0, pad), constant_values=n), jnp.pad(cores, ((0, pad), (0, 0)))
-
-    def every() -> tuple[Array, Array]:
-        return jnp.where(ok, safe, n), cores_of(safe)
-
-    ids, cores = jax.lax.cond(jnp.sum(stale) <= budget, some, every)
-    far_core = state.far_core.at[ids].set(cores, mode="drop")
-    far_valid = state.far_valid.at[jnp.where(ok, safe, n)].set(True, mode="drop")
-    return eqx.tree_at(lambda s: (s.far_core, s.far_valid), state, (far_core, far_valid))
-
-
 def _smoothstep(x: Array) -> Array:
     x = jnp.clip(x, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
@@ -200,7 +163,8 @@ def _agent_level(
 
     ``near``: blend into the next clip over the cycle's second half. ``lock``: move the root so
     that the stance foot stays put (see :func:`step`). ``cached``: the core is the agent's
-    ``far_core`` (the coarsest level, kept current by :func:`_refresh_far_cores`).
+    ``far_core`` (the coarsest level, kept current by
+    :func:`jcrowd.crowd_state.refresh_far_cores`).
     """
     lv = cm.decoders.levels[level]
     last = float(cm.frames - 1)
@@ -322,7 +286,7 @@ def step(
 
         cached = lv == nlev - 1 and not near
         if cached:
-            state = _refresh_far_cores(cm, state, safe, ok)
+            state = refresh_far_cores(cm, state, safe, ok)
 
         def one(i, lv=lv, near=near, lock=lock, cached=cached, state=state):
             return _agent_level(cm, lv, near, lock, state, i, dt, cached)

@@ -14,8 +14,9 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from jcrowd.clips import CrowdModel, next_clips
+from jcrowd.synthesis import clip_core
 
-__all__ = ["CrowdState", "Frame", "init_state"]
+__all__ = ["CrowdState", "Frame", "init_state", "refresh_far_cores"]
 
 
 class CrowdState(eqx.Module):
@@ -40,7 +41,7 @@ class CrowdState(eqx.Module):
     origin_heading: Float[Array, " N"]
     level: Int[Array, " N"]  # last LOD level; L = culled
     # The current clip's core at the coarsest level, kept while the clip plays: recomputed
-    # only when the clip changes (jcrowd.crowd._refresh_far_cores), not every step.
+    # only when the clip changes (refresh_far_cores), not every step.
     far_core: Float[Array, "N RR"]
     far_valid: Bool[Array, " N"]
     alive: Bool[Array, " N"]
@@ -164,3 +165,40 @@ def _first_clips(
     min_reliability: float,
 ) -> tuple[Array, Array, Array]:
     return next_clips(cm, origin, control, target, speed, height, min_reliability)
+
+
+def refresh_far_cores(
+    cm: CrowdModel, state: CrowdState, safe: Int[Array, " C"], ok: Bool[Array, " C"]
+) -> CrowdState:
+    """Compute the coarsest-level core of each agent in the bucket whose cached one is stale.
+
+    Stale: never computed, or the agent's clip changed since (the hand-over clears
+    ``far_valid``). The issue's design — keep the clip, recompute its core only when the clip
+    changes — for the level holding most synthesized agents (~13,000 of them on the bench
+    plaza, whose 77 × 49 core product per agent-frame cost 1.2 ms of a 100k step). Usually few
+    are stale per step (an agent changes clip once per cycle), so at most an eighth of the
+    bucket + 16 is compacted and computed; when more are (the first step, a camera cut) the
+    whole bucket is — one branch runs, and either way every agent of the bucket leaves valid.
+    The scatter into the ``(N, R)`` cache stays outside the branch so the cache is updated in
+    place. Interleaved runs: 100k 16.6–17.0 → 16.0–16.1 ms, 1M 91–95 → 85–88 ms.
+    """
+    lv = cm.decoders.levels[-1]
+    n, cap = state.num_agents, safe.shape[0]
+    budget = min(cap, cap // 8 + 16)
+    stale = ok & ~state.far_valid[safe]
+    cores_of = jax.vmap(lambda i: clip_core(lv, state.mix[i, state.current[i]]).reshape(-1))
+
+    def some() -> tuple[Array, Array]:
+        (k,) = jnp.nonzero(stale, size=budget, fill_value=cap)
+        ids = jnp.where(k < cap, safe[jnp.minimum(k, cap - 1)], n)
+        cores = cores_of(jnp.minimum(ids, n - 1))
+        pad = cap - budget
+        return jnp.pad(ids, (0, pad), constant_values=n), jnp.pad(cores, ((0, pad), (0, 0)))
+
+    def every() -> tuple[Array, Array]:
+        return jnp.where(ok, safe, n), cores_of(safe)
+
+    ids, cores = jax.lax.cond(jnp.sum(stale) <= budget, some, every)
+    far_core = state.far_core.at[ids].set(cores, mode="drop")
+    far_valid = state.far_valid.at[jnp.where(ok, safe, n)].set(True, mode="drop")
+    return eqx.tree_at(lambda s: (s.far_core, s.far_valid), state, (far_core, far_valid))
