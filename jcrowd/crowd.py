@@ -116,6 +116,12 @@ class StepConfig:
             )
         if self.chunk < 1:
             raise JcrowdError(f"lod.chunk: expected a positive integer, found {self.chunk}")
+        for name in ("refresh", "krige_budget"):
+            if getattr(self, name) < 0:
+                raise JcrowdError(
+                    f"lod.{name}: expected a non-negative integer (0: default), "
+                    f"found {getattr(self, name)}"
+                )
         if self.importance not in ("distance", "pixels"):
             raise JcrowdError(
                 f"lod.importance: expected 'distance' or 'pixels', found {self.importance!r}"
@@ -283,7 +289,6 @@ def step(
         safe = jnp.where(ok, slots, 0)
         near = lv <= config.blend_max_level
         lock = near and config.foot_lock
-
         cached = lv == nlev - 1 and not near
         if cached:
             state = refresh_far_cores(cm, state, safe, ok)

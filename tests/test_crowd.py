@@ -449,3 +449,21 @@ def test_coarsest_level_cached_cores_match_direct_decode_across_clip_changes(mod
         handed_over += int(np.sum(np.asarray(new.current) != np.asarray(state.current)))
         state = new
     assert checked > 500 and handed_over > 5
+
+
+@pytest.mark.parametrize("k", [1, 3, 12])
+def test_waypoint_pick_by_selects_or_gather_equals_indexing(model, k, monkeypatch):
+    """Both ways of reading each agent's current waypoint (selects up to SELECT_WAYPOINTS,
+    a gather beyond) equal NumPy fancy indexing, exactly (no arithmetic)."""
+    import jcrowd.crowd as crowd
+
+    _, state = _sim(model, count=10)
+    rng = np.random.default_rng(k)
+    wps = jnp.asarray(rng.uniform(-50, 50, (10, k, 2)), jnp.float32)
+    wp = jnp.asarray(rng.integers(0, k, 10), jnp.int32)
+    state = eqx.tree_at(lambda s: s.waypoints, state, wps)
+    want = np.asarray(wps)[np.arange(10), np.asarray(wp)]
+    for limit in (0, 100):  # 0: always gather; 100: always selects
+        monkeypatch.setattr(crowd, "SELECT_WAYPOINTS", limit)
+        tx, tz = jax.jit(crowd._waypoint_xz)(state, wp)
+        np.testing.assert_array_equal(np.stack([tx, tz], axis=1), want)
