@@ -38,6 +38,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from jcrowd.errors import KrigingError
+from jcrowd.fastmath import sincos
 from jcrowd.gait import find_feet
 from jcrowd.kriging.universal import reliability_one, weights_and_reliability
 from jcrowd.model import MotionModel
@@ -125,7 +126,7 @@ def build_crowd_model(model: MotionModel) -> CrowdModel:
 
 def local_to_world(v: Float[Array, "... 2"], heading: Float[Array, ...]) -> Array:
     """Rotate ``(x, z)`` from a heading frame (z forward, x left) into the world."""
-    c, s = jnp.cos(heading), jnp.sin(heading)
+    s, c = sincos(heading)
     return jnp.stack([v[..., 0] * c + v[..., 1] * s, -v[..., 0] * s + v[..., 1] * c], axis=-1)
 
 
@@ -143,7 +144,8 @@ def _aim(
     turn = jnp.clip(jnp.arctan2(left, fwd), cm.lo[iyaw], cm.hi[iyaw])
     stride = speed * cm.cycle_seconds
     c = (cm.lo + cm.hi) / 2
-    c = c.at[ix].set(stride * jnp.sin(turn / 2)).at[iz].set(stride * jnp.cos(turn / 2))
+    sin, cos = sincos(turn / 2)
+    c = c.at[ix].set(stride * sin).at[iz].set(stride * cos)
     c = c.at[iyaw].set(turn)
     if ispeed >= 0:
         c = c.at[ispeed].set(speed)

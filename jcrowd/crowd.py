@@ -46,6 +46,7 @@ from jaxtyping import Array, Bool, Int
 from jcrowd.clips import CrowdModel, local_to_world, next_clips_lod
 from jcrowd.crowd_state import CrowdState, Frame, init_state, refresh_far_cores
 from jcrowd.errors import JcrowdError
+from jcrowd.fastmath import sincos
 from jcrowd.lod import CameraView, assign_buckets, distance_levels, in_frustum, screen_height_px
 from jcrowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
 
@@ -257,12 +258,12 @@ def _dead_reckoning(
     half = turn / 2
     # Constant speed and turn rate over the cycle end at (dx, dz) with heading + turn when the
     # local velocity is the chord rotated back by half the turn, lengthened by θ/2 / sin(θ/2).
-    gain = jnp.where(jnp.abs(half) > 1e-4, half / jnp.sin(jnp.where(half == 0, 1.0, half)), 1.0)
+    gain = jnp.where(jnp.abs(half) > 1e-4, half / sincos(jnp.where(half == 0, 1.0, half))[0], 1.0)
     x, z = control[:, ix] * gain * frac, control[:, iz] * gain * frac
     # Rotating by −half into the heading frame and then into the world is one rotation by
     # heading − half (three transcendentals per agent instead of five).
     ang = state.heading - half
-    c, s = jnp.cos(ang), jnp.sin(ang)
+    s, c = sincos(ang)
     return dtau, turn * frac, x * c + z * s, -x * s + z * c
 
 
