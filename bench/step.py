@@ -25,12 +25,20 @@ Detail culling (``lod.min_pixels``, default 3 px) makes agents too small to show
 second 100k row with ``min_pixels = 0`` and a last capacity of N synthesizes every agent in view
 (the step before detail culling).
 
-``python bench/step.py [--agents 1000,100000] [--json]``; appends a row to bench/RESULTS.md.
+The step runs split over ``--cpu-devices K`` CPU devices (default: one per core, as
+``jcrowd run --cpu-devices``; the row says how many): XLA:CPU runs one step's kernels nearly one
+after another, so one device uses about one core. The full-detail rate is measured on the same
+devices (each decodes its share of the agents); the naive baseline is one program, which XLA
+parallelizes over the cores inside each kernel.
+
+``python bench/step.py [--agents 1000,100000] [--cpu-devices K] [--json]``; appends a row to
+bench/RESULTS.md.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from dataclasses import replace
@@ -42,12 +50,13 @@ import numpy as np
 from common import machine, report
 
 from jcrowd import load_default_model
+from jcrowd.cli.run import use_cpu_devices
 from jcrowd.crowd import bucket_chunk, decode_bucket
 from jcrowd.model import MotionModel
 from jcrowd.posevec import PoseLayout
 from jcrowd.rotation import quat_from_expmap, quat_mul, yaw_quat
 from jcrowd.scenario import parse_scenario
-from jcrowd.simulate import prepare
+from jcrowd.simulate import prepare, shard_state
 from jcrowd.skeleton import forward_kinematics
 from jcrowd.synthesis import decode_coeffs, level_points, pose_from_coeffs
 
@@ -143,21 +152,40 @@ def naive_ms(model: MotionModel, n: int, repeats: int) -> float:
 def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
     """Agent-frames/s of level-0 decode + FK for ``n`` agents (every agent at full detail),
     decoded as the step decodes a bucket: in chunks (:func:`jcrowd.crowd.decode_bucket`; one
-    vmap over 100k agents materializes 480 MB of cores and runs memory-bound)."""
+    vmap over 100k agents materializes 480 MB of cores and runs memory-bound), each device its
+    own share of the agents as in the split step."""
+    from jax import shard_map
+    from jax.sharding import Mesh, NamedSharding
+    from jax.sharding import PartitionSpec as P
+
     lv = sim.crowd.decoders.levels[0]
-    mix, tau = state.clip()[1][:n], state.tau[:n]
-    xz, h, hd = state.position[:n], state.height[:n], state.heading[:n]
+    host = [np.asarray(a)[:n] for a in (state.clip()[1], state.tau, state.x, state.z)]
+    host += [np.asarray(state.heading)[:n], np.asarray(state.height)[:n]]
 
-    def one(i: jax.Array) -> Any:
-        return level_points(
-            lv, pose_from_coeffs(lv, decode_coeffs(lv, mix[i], tau[i])), xz[i], hd[i], h[i]
+    def decode(mix: Any, tau: Any, x: Any, z: Any, hd: Any, h: Any) -> Any:
+        m = tau.shape[0]
+
+        def one(i: jax.Array) -> Any:
+            y = pose_from_coeffs(lv, decode_coeffs(lv, mix[i], tau[i]))
+            return level_points(lv, y, jnp.stack([x[i], z[i]]), hd[i], h[i])
+
+        chunk = bucket_chunk(m, sim.config.chunk)  # as the step would for a level of m slots
+        ids = jnp.arange(m, dtype=jnp.int32)
+        return decode_bucket(jax.vmap(one), ids, jnp.int32(m), chunk)
+
+    devices = jax.devices()
+    if len(devices) > 1:
+        mesh = Mesh(np.array(devices), ("agents",))
+        agents = P("agents")
+        args = [jax.device_put(a, NamedSharding(mesh, agents)) for a in host]
+        f = jax.jit(
+            shard_map(decode, mesh=mesh, in_specs=agents, out_specs=agents, check_vma=False)
         )
-
-    ids = jnp.arange(n, dtype=jnp.int32)
-    chunk = bucket_chunk(n, sim.config.chunk)  # as the step would for a level of n slots
-    f = jax.jit(lambda ids: decode_bucket(jax.vmap(one), ids, jnp.int32(n), chunk))
-    jax.block_until_ready(f(ids))
-    return n / (_median_ms(lambda: f(ids), repeats) * 1e-3)
+    else:
+        args = [jnp.asarray(a) for a in host]
+        f = jax.jit(decode)
+    jax.block_until_ready(f(*args))
+    return n / (_median_ms(lambda: f(*args), repeats) * 1e-3)
 
 
 def roof_bytes(state: Any, frame: Any, refresh: int) -> int:
@@ -178,6 +206,7 @@ def run_count(
     side = float(np.sqrt(10.0 * n))
     text = PLAZA.format(side=side + 2, inner=side, eye_z=-side / 2 - 0.5, n=n)
     sim, state = prepare(parse_scenario(text, "bench-plaza.toml"), model)
+    state = shard_state(state)  # one block of agents per device (unchanged on one device)
     if min_pixels is not None:  # every agent in view synthesized: no dots at all
         caps = (*sim.config.capacities[:-1], n)
         sim = replace(sim, config=replace(sim.config, min_pixels=min_pixels, capacities=caps))
@@ -221,7 +250,9 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=20)
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--no-record", action="store_true")
+    ap.add_argument("--cpu-devices", type=int, default=os.cpu_count() or 1)
     args = ap.parse_args()
+    use_cpu_devices(args.cpu_devices)  # before JAX starts its backend
     counts = [int(v) for v in args.agents.split(",")]
     model = load_default_model()
     bw = bandwidth_gbs()
@@ -250,13 +281,14 @@ def main() -> None:
         "state_bytes_per_agent": rows[-1]["state_bytes_per_agent"],
         "bandwidth_gbs": bw,
         "device": str(jax.devices()[0].platform),
+        "devices": len(jax.devices()),
         "machine": machine(),
         "jax": jax.__version__,
     }
     text = _table(out)
     report(
         "step",
-        f"{out['machine']}, jax {out['jax']}, {out['device']}",
+        f"{out['machine']}, jax {out['jax']}, {out['device']} × {out['devices']}",
         out,
         text,
         args.json,

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import jax
@@ -32,7 +32,14 @@ from jcrowd.model import MotionModel
 from jcrowd.scenario import Scenario, camera_at
 from jcrowd.scenario_spawn import Spawn, spawn
 
-__all__ = ["Simulation", "prepare", "shard_state", "step_compiler_options", "thresholds_for"]
+__all__ = [
+    "Simulation",
+    "per_device_config",
+    "prepare",
+    "shard_state",
+    "step_compiler_options",
+    "thresholds_for",
+]
 
 
 @functools.cache
@@ -110,11 +117,91 @@ class Simulation:
         def run(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
             return step(crowd, config, state, view, dt)
 
+        devices = jax.devices()
+        if len(devices) > 1:
+            run = _per_device_step(crowd, config, devices)
         options = step_compiler_options()
         donated = (0,) if donate else ()
         if options:
             return jax.jit(run, donate_argnums=donated, compiler_options=options)
         return jax.jit(run, donate_argnums=donated)
+
+
+def per_device_config(config: StepConfig, devices: int) -> StepConfig:
+    """One device's share of the step's budgets: each capacity, ``refresh`` and
+    ``krige_budget`` divided by the device count, rounded up (capacities to at least one
+    chunk)."""
+    if devices == 1:
+        return config
+
+    def share(v: int, floor: int = 1) -> int:
+        return max(-(-v // devices), floor) if v > 0 else v
+
+    return replace(
+        config,
+        capacities=tuple(share(c, min(c, config.chunk)) for c in config.capacities),
+        refresh=share(config.refresh),
+        krige_budget=share(config.krige_budget),
+    )
+
+
+def _per_device_step(crowd: CrowdModel, config: StepConfig, devices: list[Any]) -> Any:
+    """The step over several devices: each runs it on its own block of agents.
+
+    ``shard_map`` over a one-axis mesh ``agents`` (the mesh :func:`shard_state` places the state
+    on): device ``k`` steps agents ``[k·n, (k+1)·n)`` with :func:`per_device_config`'s share of
+    every budget, so no data moves between devices inside a step except the two counters
+    (summed). The LOD budget is therefore per device: a device whose block holds more near
+    agents than its share of a level's capacity places the excess coarser even if another
+    device has room (with agents spread evenly this rarely binds: the plaza bench fills the
+    same levels either way). A frame's level-``l`` bucket is the devices' buckets one after
+    the other (global agent ids; each block's valid slots lead within it).
+
+    Why not one global program partitioned by XLA: the step's compactions (``nonzero``,
+    ``top_k``, scatters over the agent axis) then need the whole axis on every device; on
+    2 CPU devices the 100k plaza took 379 ms per step that way against 12.5 ms on one device,
+    and 7.2 ms split like this (2 cores).
+    """
+    from jax import shard_map
+    from jax.sharding import Mesh
+    from jax.sharding import PartitionSpec as P
+
+    k = len(devices)
+    mesh = Mesh(np.array(devices), ("agents",))
+    local_config = per_device_config(config, k)
+
+    def local(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
+        new, frame = step(crowd, local_config, state, view, dt)
+        n_local = state.num_agents
+        offset = jax.lax.axis_index("agents") * n_local
+        slots = tuple(
+            jnp.where(ok, s + offset, n_local * k).astype(s.dtype)
+            for s, ok in zip(frame.slots, frame.valid, strict=True)
+        )
+        total = (jax.lax.psum(frame.overflow, "agents"), jax.lax.psum(frame.deferred, "agents"))
+        return new, Frame(slots, frame.valid, frame.points, frame.level, frame.dots, *total)
+
+    agents, same = P("agents"), P()
+    nlev = len(config.capacities)
+    per_level = (agents,) * nlev
+    frame_spec = Frame(per_level, per_level, per_level, agents, agents, same, same)  # type: ignore[arg-type]
+    mapped = shard_map(
+        local,
+        mesh=mesh,
+        in_specs=(agents, same, same),
+        out_specs=(agents, frame_spec),
+        check_vma=False,
+    )
+
+    def run(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
+        if state.num_agents % k:
+            raise ScenarioError(
+                f"sharding: expected an agent count divisible by the {k} devices, "
+                f"found {state.num_agents}"
+            )
+        return mapped(state, view, dt)
+
+    return run
 
 
 def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdState]:

@@ -1,0 +1,172 @@
+"""The step split over several devices (``jcrowd.simulate._per_device_step``).
+
+Oracle: the split step on ``K`` devices equals the one-device step run on each block of agents
+separately with :func:`~jcrowd.simulate.per_device_config`'s share of the budget, the blocks'
+frames joined with global agent ids and the counters summed — including when the budget binds.
+When it does not bind, it also equals the one-device step on the whole crowd.
+
+Tolerance 1e-5 (m, and aligned frames for τ): the same float32 program per agent; XLA may
+fuse or order a block's arithmetic differently from the whole crowd's.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from jcrowd.crowd import StepConfig
+from jcrowd.simulate import per_device_config
+
+SCENE = """
+model = "default"
+seed = 5
+duration = 10.0
+fps = 30
+[ground]
+center = [0, 0]
+size = [200, 200]
+[camera]
+eye = [0, 1.7, -20]
+target = [0, 1.0, 0]
+fov = 60
+[[groups]]
+name = "walkers"
+count = 48
+speed = [1.1, 1.4]
+spawn = { shape = "rect", center = [0, 20], size = [40, 40] }
+path = { waypoints = [[0, 60], [60, 60]], loop = false }
+"""
+
+SCRIPT = textwrap.dedent(
+    """
+    import json, sys
+    from dataclasses import replace
+    import jax, jax.numpy as jnp, numpy as np
+    from jcrowd import load_default_model
+    from jcrowd.scenario import parse_scenario
+    from jcrowd.simulate import per_device_config, prepare, shard_state
+    mode, caps, text = sys.argv[1], json.loads(sys.argv[2]), sys.stdin.read()
+    sim, state = prepare(parse_scenario(text, "t.toml"), load_default_model())
+    if caps:
+        sim = replace(sim, config=replace(sim.config, capacities=tuple(caps)))
+    n, steps = state.num_agents, 6
+
+    def run(sim, state):
+        fn = sim.compiled()
+        for i in range(steps):
+            state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
+        return state, frame
+
+    def record(state, frame, offset, n_total):
+        pts = {}
+        for lv, (s, ok, p) in enumerate(zip(frame.slots, frame.valid, frame.points)):
+            s, ok, p = np.asarray(s), np.asarray(ok), np.asarray(p)
+            assert (s[~ok] == n_total).all()
+            for i in np.flatnonzero(ok):
+                pts[str(int(s[i]) + offset)] = [lv, p[i].tolist()]
+        return {"x": np.asarray(state.x).tolist(), "tau": np.asarray(state.tau).tolist(),
+                "level": np.asarray(frame.level).tolist(), "dots": np.asarray(frame.dots).tolist(),
+                "overflow": int(frame.overflow), "deferred": int(frame.deferred), "points": pts}
+
+    if mode == "split":
+        state, frame = run(sim, shard_state(state))
+        out = record(state, frame, 0, n)
+        out["devices"] = len(jax.devices())
+        out["shards"] = len(state.x.sharding.device_set)
+    elif mode == "whole":
+        out = record(*run(sim, state), 0, n)
+    else:  # "blocks": the one-device step on each half with its share of the budget
+        half = n // 2
+        sim_b = replace(sim, config=per_device_config(sim.config, 2))
+        parts = []
+        for b in range(2):
+            block = jax.tree.map(lambda x: x[b * half:(b + 1) * half], state)
+            parts.append(record(*run(sim_b, block), b * half, half))
+        out = {k: parts[0][k] + parts[1][k] for k in ("x", "tau", "level", "dots")}
+        out["overflow"] = parts[0]["overflow"] + parts[1]["overflow"]
+        out["deferred"] = parts[0]["deferred"] + parts[1]["deferred"]
+        out["points"] = {**parts[0]["points"], **parts[1]["points"]}
+    print(json.dumps(out))
+    """
+)
+
+
+def _run(mode: str, devices: int, caps: list[int] | None = None) -> dict:
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
+    out = subprocess.run(
+        [sys.executable, "-c", SCRIPT, mode, json.dumps(caps or [])],
+        input=SCENE,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    if out.returncode:
+        pytest.fail(out.stderr[-3000:])
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _same(a: dict, b: dict) -> None:
+    np.testing.assert_allclose(a["x"], b["x"], atol=1e-5)
+    np.testing.assert_allclose(a["tau"], b["tau"], atol=1e-5)
+    assert a["level"] == b["level"] and a["dots"] == b["dots"]
+    assert (a["overflow"], a["deferred"]) == (b["overflow"], b["deferred"])
+    assert a["points"].keys() == b["points"].keys()
+    for k, (lv, p) in a["points"].items():
+        assert b["points"][k][0] == lv
+        np.testing.assert_allclose(p, b["points"][k][1], atol=1e-5)
+
+
+def test_split_equals_blocks_when_the_budget_binds() -> None:
+    caps = [2, 2, 2, 2, 4, 48]  # far fewer near slots than the 48 agents 0–40 m away want
+    split, blocks = _run("split", 2, caps), _run("blocks", 1, caps)
+    assert split["devices"] == 2 and split["shards"] == 2
+    assert split["overflow"] > 0  # the case this test is for
+    _same(split, blocks)
+    levels = np.asarray(split["level"])
+    shown = sum(1 for lv, _ in split["points"].values())
+    assert shown == int((levels < len(caps)).sum())  # every placed agent is drawn once
+
+
+def test_split_equals_whole_crowd_when_nothing_overflows() -> None:
+    split, whole = _run("split", 2), _run("whole", 1)
+    assert whole["overflow"] == 0
+    _same(split, whole)
+
+
+@given(
+    st.lists(st.integers(1, 100_000), min_size=1, max_size=7),
+    st.integers(0, 10_000),
+    st.integers(0, 10_000),
+    st.integers(1, 16),
+)
+def test_per_device_config_covers_the_budget(
+    caps: list[int], refresh: int, krige: int, devices: int
+) -> None:
+    config = StepConfig(
+        capacities=tuple(caps),
+        thresholds=(30.0,) * (len(caps) - 1),
+        refresh=refresh,
+        krige_budget=krige,
+    )
+    local = per_device_config(config, devices)
+    for whole, share in zip(config.capacities, local.capacities, strict=True):
+        assert share * devices >= whole  # never less room in all than on one device
+        assert min(whole, config.chunk) <= share <= whole
+        assert share * devices < whole + devices or share == min(whole, config.chunk)
+    assert local.refresh * devices >= refresh and local.krige_budget * devices >= krige
+    assert (local.refresh == 0) == (refresh == 0)  # 0 stays "automatic", from the block's N
+    assert per_device_config(config, 1) == config
+    assert replace(local, capacities=config.capacities, refresh=refresh, krige_budget=krige) == (
+        config
+    )
