@@ -169,7 +169,7 @@ def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
             y = pose_from_coeffs(lv, decode_coeffs(lv, mix[i], tau[i]))
             return level_points(lv, y, jnp.stack([x[i], z[i]]), hd[i], h[i])
 
-        chunk = bucket_chunk(m, sim.config.chunk)  # as the step would for a level of m slots
+        chunk = bucket_chunk(m, sim.config.chunk, lv.cores.shape[1])  # as the step would
         ids = jnp.arange(m, dtype=jnp.int32)
         return decode_bucket(jax.vmap(one), ids, jnp.int32(m), chunk)
 
