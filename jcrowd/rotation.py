@@ -209,7 +209,9 @@ def quat_from_expmap(r: Any) -> Any:
     Uses ``sin(θ/2)/θ`` with its Taylor series near 0, so it is smooth (and differentiable) at 0.
     """
     xp = _xp(r)
-    theta2 = xp.sum(r * r, axis=-1, keepdims=True)
+    # Written out, not xp.sum: XLA:CPU sends a 3-element reduce to a separate library kernel
+    # (0.7 ms of a ~9 ms level-0 decode at 16k agents) where a sum of products fuses.
+    theta2 = r[..., 0:1] * r[..., 0:1] + r[..., 1:2] * r[..., 1:2] + r[..., 2:3] * r[..., 2:3]
     small = theta2 < 1e-8
     theta = xp.sqrt(xp.where(small, 1.0, theta2))
     sin, cos = _sincos(xp, 0.5 * theta)
