@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -215,3 +216,46 @@ def test_dots_are_recorded_and_drawn(tmp_path: Path, capsys: pytest.CaptureFixtu
     # The dots are the only difference: some pixels change, most (ground, sky) do not.
     changed = np.any(images[0] != images[1], axis=-1).mean()
     assert 0 < changed < 0.2
+
+
+def test_run_on_two_cpu_devices_records_the_same_crowd(tmp_path: Path) -> None:
+    """`jcrowd run --cpu-devices 2` (a fresh process: the option must precede JAX's start) runs
+    the crowd split over two CPU devices and records what one device records (nothing overflows
+    in this small scene, so the per-device budget does not bind; 1e-5 m, as the sharded tests)."""
+    import subprocess
+    import sys
+
+    scene = tmp_path / "small.toml"
+    scene.write_text(SMALL)
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    env.pop("XLA_FLAGS", None)
+    outs = {}
+    for k in (1, 2):
+        cmd = [sys.executable, "-m", "jcrowd.cli", "run", str(scene), "--steps", "8", "--json"]
+        cmd += ["--cpu-devices", str(k), "--out", str(tmp_path / f"run{k}.npz")]
+        done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr[-2000:]
+        outs[k] = json.loads(done.stdout)
+    assert outs[1]["devices"] == 1 and outs[2]["devices"] == 2
+    assert outs[2]["recompiles"] == 0 and outs[2]["agents"] == 12
+    one, two = np.load(tmp_path / "run1.npz"), np.load(tmp_path / "run2.npz")
+    np.testing.assert_allclose(two["position"], one["position"], atol=1e-5)
+    np.testing.assert_array_equal(two["level"], one["level"])
+
+
+def test_cpu_devices_after_jax_started_is_a_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import jax
+
+    # The option writes XLA_FLAGS; restore it after the test so later subprocesses (which
+    # inherit this environment) are not asked for 3 devices.
+    monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
+
+    jax.devices()  # this test process has started JAX on one CPU device
+    scene = tmp_path / "small.toml"
+    scene.write_text(SMALL)
+    code = main(["run", str(scene), "--steps", "2", "--cpu-devices", "3", "--json"])
+    assert code != 0
+    err = capsys.readouterr().err
+    assert "--cpu-devices: expected 3 CPU devices, found 1" in err

@@ -139,6 +139,7 @@ def _run(args: argparse.Namespace) -> dict[str, Any]:
 
     scenario = load_scenario(args.scenario)
     model, model_path = load_model(scenario, args.model)
+    check_cpu_devices(args.cpu_devices)
     sim, state = prepare(scenario, model)
     state = shard_state(state)
     steps = sim.steps
@@ -150,6 +151,7 @@ def _run(args: argparse.Namespace) -> dict[str, Any]:
         raise JcrowdError(f"run: expected at least one step, found {steps}")
     result, recording = simulate(sim, state, steps, args.record)
     result.update(scenario=str(args.scenario), model=model_path, record=args.record, out=None)
+    result["devices"] = jax_device_count()
     if args.out:
         from jcrowd.synthesis import point_parents
 
@@ -158,6 +160,28 @@ def _run(args: argparse.Namespace) -> dict[str, Any]:
         if jax_process_index() == 0:  # one writer when several processes run one crowd
             result["out"] = str(save_recording(args.out, recording))
     return result
+
+
+def check_cpu_devices(count: int) -> None:
+    """``--cpu-devices`` took effect: JAX on CPU sees that many devices in this process (it does
+    not when the backend had started before :func:`use_cpu_devices`, e.g. in a host program
+    that used JAX first)."""
+    import jax
+
+    from jcrowd.errors import JcrowdError
+
+    if count > 1 and jax.default_backend() == "cpu" and len(jax.local_devices()) != count:
+        raise JcrowdError(
+            f"--cpu-devices: expected {count} CPU devices, found {len(jax.local_devices())} (JAX "
+            f"started before the option was read; set XLA_FLAGS="
+            f"--xla_force_host_platform_device_count={count} before starting Python)"
+        )
+
+
+def jax_device_count() -> int:
+    import jax
+
+    return len(jax.devices())
 
 
 def jax_process_index() -> int:
