@@ -211,7 +211,7 @@ def run_count(
         caps = (*sim.config.capacities[:-1], n)
         sim = replace(sim, config=replace(sim.config, min_pixels=min_pixels, capacities=caps))
     fn = sim.compiled()
-    view, dt = sim.view_at(0.0), sim.dt
+    view, dt = sim.view_at(0.0), sim.dt_array
     t = time.perf_counter()
     jax.block_until_ready(fn(jax.tree.map(jnp.copy, state), view, dt))  # state is donated
     compile_s = time.perf_counter() - t

@@ -132,7 +132,7 @@ def render_scenario(
     heights = np.asarray(sim.spawn.height, np.float32)
     t0 = time.perf_counter()
     warm = jax.tree.map(jax.numpy.copy, state)  # the step donates its input state
-    jax.block_until_ready(fn(warm, sim.view_at(0.0), sim.dt))
+    jax.block_until_ready(fn(warm, sim.view_at(0.0), sim.dt_array))
     compile_s = time.perf_counter() - t0
     step_ms, draw_ms = [], []
     sink = _Sink(out, scenario.fps)
@@ -149,7 +149,7 @@ def render_scenario(
             for i in range(n_frames):
                 t = time.perf_counter()
                 xz = np.asarray(state.position)  # the frame is the step's start; state is donated
-                state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
+                state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt_array)
                 host = jax.device_get((frame.slots, frame.valid, frame.points))
                 dots = np.asarray(frame.dots)
                 step_ms.append(1e3 * (time.perf_counter() - t))

@@ -223,7 +223,8 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
     nlev = len(sim.config.capacities)
     t0 = time.perf_counter()
     warm = jax.tree.map(jnp.copy, state)  # the step donates its input state
-    jax.block_until_ready(step(warm, sim.view_at(0.0), sim.dt))  # compile (+ one step, dropped)
+    # Compile (+ one step, dropped).
+    jax.block_until_ready(step(warm, sim.view_at(0.0), sim.dt_array))
     compile_s = time.perf_counter() - t0
     rec: dict[str, list] = {
         k: [] for k in ("position", "heading", "level", "dots", "alive", "eye", "target")
@@ -259,7 +260,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
                 )
             host = _fetch(snapshot)  # before the step takes the state's buffers
             t = time.perf_counter()
-            new, frame = step(state, view, sim.dt)
+            new, frame = step(state, view, sim.dt_array)
             jax.block_until_ready(new)
             times.append(time.perf_counter() - t)
             parts = {
