@@ -259,3 +259,24 @@ def test_cpu_devices_after_jax_started_is_a_clear_error(
     assert code != 0
     err = capsys.readouterr().err
     assert "--cpu-devices: expected 3 CPU devices, found 1" in err
+
+
+def test_render_on_two_cpu_devices(tmp_path: Path) -> None:
+    """`jcrowd render` with the step split over two devices: a level's bucket then holds two
+    shares of its capacity, rounded up and at least a chunk each (here more slots than the
+    configured capacity), so the renderer must be sized from the frame. It was not: this test
+    failed before the fix."""
+    import subprocess
+    import sys
+
+    scene = tmp_path / "small.toml"
+    scene.write_text(SMALL)
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    env["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
+    out = tmp_path / "frames.png"
+    cmd = [sys.executable, "-m", "jcrowd.cli", "render", str(scene), "--frames", "2"]
+    cmd += ["--size", "160x90", "--out", str(out), "--json"]
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert json.loads(done.stdout)["frames"] == 2
+    assert sorted(p.name for p in out.iterdir()) == ["frame_00000.png", "frame_00001.png"]

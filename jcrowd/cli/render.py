@@ -119,21 +119,24 @@ def render_scenario(
     from rich.progress import Progress
 
     from jcrowd.render import CrowdRenderer, LevelInstances, write_png
-    from jcrowd.simulate import prepare
+    from jcrowd.simulate import prepare, shard_state
     from jcrowd.synthesis import point_parents
 
     sim, state = prepare(scenario, model)
+    state = shard_state(state)  # one block of agents per device (unchanged on one device)
     fn = sim.compiled()
     n_frames = sim.steps if frames is None else frames
     parents = point_parents(model)
-    caps = sim.config.capacities
     group_colors = np.asarray(sim.spawn.color, np.float32)
     n = sim.num_agents
     heights = np.asarray(sim.spawn.height, np.float32)
     t0 = time.perf_counter()
     warm = jax.tree.map(jax.numpy.copy, state)  # the step donates its input state
-    jax.block_until_ready(fn(warm, sim.view_at(0.0), sim.dt_array))
+    _, first = jax.block_until_ready(fn(warm, sim.view_at(0.0), sim.dt_array))
     compile_s = time.perf_counter() - t0
+    # Slots per level as the step returns them (split over K devices a level holds K shares of
+    # its capacity, rounded up: jcrowd.simulate.per_device_config).
+    caps = tuple(int(s.shape[0]) for s in first.slots)
     step_ms, draw_ms = [], []
     sink = _Sink(out, scenario.fps)
     ok = False
