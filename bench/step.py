@@ -56,7 +56,7 @@ from jcrowd.model import MotionModel
 from jcrowd.posevec import PoseLayout
 from jcrowd.rotation import quat_from_expmap, quat_mul, yaw_quat
 from jcrowd.scenario import parse_scenario
-from jcrowd.simulate import prepare, shard_state
+from jcrowd.simulate import agent_mesh, prepare, shard_state
 from jcrowd.skeleton import forward_kinematics
 from jcrowd.synthesis import decode_coeffs, level_points, pose_from_coeffs
 
@@ -155,7 +155,7 @@ def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
     vmap over 100k agents materializes 480 MB of cores and runs memory-bound), each device its
     own share of the agents as in the split step."""
     from jax import shard_map
-    from jax.sharding import Mesh, NamedSharding
+    from jax.sharding import NamedSharding
     from jax.sharding import PartitionSpec as P
 
     lv = sim.crowd.decoders.levels[0]
@@ -175,7 +175,7 @@ def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
 
     devices = jax.devices()
     if len(devices) > 1:
-        mesh = Mesh(np.array(devices), ("agents",))
+        mesh = agent_mesh()
         agents = P("agents")
         args = [jax.device_put(a, NamedSharding(mesh, agents)) for a in host]
         f = jax.jit(

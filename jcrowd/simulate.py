@@ -34,6 +34,8 @@ from jcrowd.scenario_spawn import Spawn, spawn
 
 __all__ = [
     "Simulation",
+    "agent_mesh",
+    "check_divisible",
     "on_all_devices",
     "per_device_config",
     "prepare",
@@ -154,13 +156,29 @@ def on_all_devices(tree: Any) -> Any:
     to the others by JAX's slow argument path at every call: 0.5 ms of a 2.8 ms step at 2k
     agents on two CPU devices (measured with the view and ``dt`` placed once instead).
     """
-    devices = jax.devices()
-    if len(devices) == 1 or jax.process_count() > 1:
+    if len(jax.devices()) == 1 or jax.process_count() > 1:
         return tree
-    from jax.sharding import Mesh, NamedSharding
+    from jax.sharding import NamedSharding
     from jax.sharding import PartitionSpec as P
 
-    return jax.device_put(tree, NamedSharding(Mesh(np.array(devices), ("agents",)), P()))
+    return jax.device_put(tree, NamedSharding(agent_mesh(), P()))
+
+
+def agent_mesh() -> Any:
+    """The one-axis mesh ``agents`` over every device of every process (``jax.devices()``
+    order): the state's agent axis is split over it (:func:`shard_state`) and the step runs one
+    block per device on it."""
+    from jax.sharding import Mesh
+
+    return Mesh(np.array(jax.devices()), ("agents",))
+
+
+def check_divisible(agents: int, devices: int) -> None:
+    """The agent axis splits into equal blocks, one per device."""
+    if agents % devices:
+        raise ScenarioError(
+            f"sharding: expected an agent count divisible by the {devices} devices, found {agents}"
+        )
 
 
 def per_device_config(config: StepConfig, devices: int) -> StepConfig:
@@ -196,14 +214,13 @@ def _per_device_step(crowd: CrowdModel, config: StepConfig, devices: list[Any]) 
     Why not one global program partitioned by XLA: the step's compactions (``nonzero``,
     ``top_k``, scatters over the agent axis) then need the whole axis on every device; on
     2 CPU devices the 100k plaza took 379 ms per step that way against 12.5 ms on one device,
-    and 7.2 ms split like this (2 cores).
+    and 8.6–9.7 ms split like this (2 cores; bench/RESULTS.md).
     """
     from jax import shard_map
-    from jax.sharding import Mesh
     from jax.sharding import PartitionSpec as P
 
     k = len(devices)
-    mesh = Mesh(np.array(devices), ("agents",))
+    mesh = agent_mesh()
     local_config = per_device_config(config, k)
 
     def local(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
@@ -230,11 +247,7 @@ def _per_device_step(crowd: CrowdModel, config: StepConfig, devices: list[Any]) 
     )
 
     def run(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
-        if state.num_agents % k:
-            raise ScenarioError(
-                f"sharding: expected an agent count divisible by the {k} devices, "
-                f"found {state.num_agents}"
-            )
+        check_divisible(state.num_agents, k)
         return mapped(state, view, dt)
 
     return run
@@ -295,17 +308,14 @@ def shard_state(state: CrowdState) -> CrowdState:
     (``jax.make_array_from_process_local_data``). Every process builds the same initial state
     (spawning is deterministic from the seed), so no data is sent at start.
     """
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+    from jax.sharding import NamedSharding, PartitionSpec
 
     devices = jax.devices()
     if len(devices) == 1:
         return state
     n = state.num_agents
-    if n % len(devices):
-        raise ScenarioError(
-            f"sharding: expected an agent count divisible by the {len(devices)} devices, found {n}"
-        )
-    sharding = NamedSharding(Mesh(np.array(devices), ("agents",)), PartitionSpec("agents"))
+    check_divisible(n, len(devices))
+    sharding = NamedSharding(agent_mesh(), PartitionSpec("agents"))
     procs, me = jax.process_count(), jax.process_index()
     per = n // procs
 
