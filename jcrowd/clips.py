@@ -98,7 +98,7 @@ def build_crowd_model(model: MotionModel) -> CrowdModel:
     index += tuple(names.index(c) if c in names else -1 for c in ("speed", "height"))
     dec = build_decoders(model)
     lv = dec.levels[0]
-    cores = np.asarray(lv.cores, np.float64).reshape(-1, *lv.ranks)
+    cores = np.asarray(lv.mix_cores(), np.float64).reshape(-1, *lv.ranks)
     delta_a = np.einsum(
         "r,ars,ts->ta", np.asarray(lv.u_pose)[-1], cores, np.asarray(lv.u_time, np.float64)
     )

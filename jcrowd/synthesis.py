@@ -7,11 +7,14 @@ basis — because the model's one variogram makes ``b(c)`` the same at every lev
 cores and the trend planes (000 Eq. 8), and the pose vector at aligned frame ``τ`` is
 ``y = U_P K(c) w_T(τ)`` with ``w_T(τ)`` the linear interpolation of rows of ``U_T`` (000 Eq. 5).
 
-Per agent-frame: ``K(c) = a V`` (``A × R_P R_T``; under ``vmap`` one GEMM for a whole bucket),
-``w_T(τ)`` from two rows of ``U_T``, ``g = K w_T`` and ``y = U_P g``. No per-agent core is kept
-between steps (a full-level core per agent at 100k agents would be 480 MB, DESIGN §5). Measured
-on this 2-core CPU at 100k agents, level 5: 10 ms this way vs 161 ms for gathering two rows of a
-precomputed ``V U_Tᵀ`` table per agent (XLA's CPU gather materialises every row).
+Per agent-frame: ``K(c) = a V`` (``A × R_P R_T``; under ``vmap`` one GEMM for a whole bucket;
+``V`` is stored as two factors of its rank, :func:`_factor_cores`), ``w_T(τ)`` from two rows of
+``U_T``, ``g = K w_T`` and ``y = U_P g``. No per-agent core is kept between steps (a full-level
+core per agent at 100k agents would be 480 MB, DESIGN §5; and reading a cached core costs about
+what computing it does here: 16k level-0 agents per device read theirs at ~9 GB/s, 8.8 ms, vs
+8.4 ms for the factored GEMM). Measured on this 2-core CPU at 100k agents, level 5: 10 ms this
+way vs 161 ms for gathering two rows of a precomputed ``V U_Tᵀ`` table per agent (XLA's CPU
+gather materialises every row).
 
 Forward kinematics runs on the level's *kept* joints only: a dropped joint keeps its reference
 rotation, so the chain from a kept joint's nearest kept ancestor is a constant rotation and
@@ -61,7 +64,9 @@ class LevelDecoder(eqx.Module):
     """What one level needs to turn ``(a, τ)`` into joint positions.
 
     Attributes:
-        cores: ``(A, R_P·R_T)``: the residual cores then the trend planes, flattened.
+        cores: ``(Q, R_P·R_T)``: with ``mix_basis`` ``M``, the residual cores then the trend
+            planes (``A`` rows, flattened) are ``V = M · cores`` (:func:`_factor_cores`);
+            without it ``cores`` is ``V`` itself (``Q = A``).
         u_time: ``(T, R_T)``.
         u_pose: ``(P_l, R_P)`` scaled rows of ``U_P`` the level decodes: the 7 root rows, the
             kept joints' exp-map rows, then ΔA.
@@ -72,9 +77,10 @@ class LevelDecoder(eqx.Module):
         direct: static, per output point the kept joint it *is* (its anchor, at offset 0), or
             −1 for a point placed rigidly off its anchor (dropped joints, End Sites).
         point_offset: ``(J + E, 3)`` each output point in its anchor's frame (1 m character).
+        mix_basis: ``(A, Q)`` or ``None``.
     """
 
-    cores: Float[Array, "A RR"]
+    cores: Float[Array, "Q RR"]
     u_time: Float[Array, "T RT"]
     u_pose: Float[Array, "P R"]
     local_ref: Float[Array, "K 4"]
@@ -82,6 +88,7 @@ class LevelDecoder(eqx.Module):
     anchor: tuple[int, ...] = eqx.field(static=True)
     point_offset: Float[Array, "N 3"]
     direct: tuple[int, ...] = eqx.field(static=True, default=())
+    mix_basis: Float[Array, "A Q"] | None = None
 
     @property
     def num_kept(self) -> int:
@@ -90,6 +97,12 @@ class LevelDecoder(eqx.Module):
     @property
     def ranks(self) -> tuple[int, int]:
         return int(self.u_pose.shape[1]), int(self.u_time.shape[1])
+
+    def mix_cores(self) -> Float[Array, "A RR"]:
+        """``V``, one flattened core per entry of the mixing vector."""
+        if self.mix_basis is None:
+            return self.cores
+        return jnp.dot(self.mix_basis, self.cores, precision=_HI)
 
 
 class Decoders(eqx.Module):
@@ -109,7 +122,8 @@ class Decoders(eqx.Module):
 
     @property
     def mix_size(self) -> int:
-        return int(self.levels[0].cores.shape[0])
+        lv = self.levels[0]
+        return int((lv.cores if lv.mix_basis is None else lv.mix_basis).shape[0])
 
 
 def _chain(
@@ -178,8 +192,10 @@ def _level_decoder(model: MotionModel, level: int) -> LevelDecoder:
             point_offset.append(off + quat_rotate(quat_mul(rot, reference[parent]), end))
     names = tuple(skel.names[j] for j in kept)
     f32 = np.float32
+    basis, cores = _factor_cores(terms)
     return LevelDecoder(
-        cores=jnp.asarray(terms, f32),
+        cores=jnp.asarray(cores, f32),
+        mix_basis=None if basis is None else jnp.asarray(basis, f32),
         u_time=jnp.asarray(lv.u_time, f32),
         u_pose=jnp.asarray(u_pose, f32),
         local_ref=jnp.asarray(np.stack(local_ref), f32),
@@ -190,6 +206,32 @@ def _level_decoder(model: MotionModel, level: int) -> LevelDecoder:
             anchor[j] if j in kept_set else -1 for j in range(skel.num_joints + len(ends))
         ),
     )
+
+
+FACTOR_RTOL = 1e-6
+"""Singular values of ``V`` below this fraction of the largest count as zero."""
+
+
+def _factor_cores(v: np.ndarray) -> tuple[np.ndarray | None, np.ndarray]:
+    """``V = M W`` with ``M`` ``(A, Q)`` and ``W`` ``(Q, R_P R_T)``, ``Q = rank V``, when that
+    makes ``a V = (a M) W`` cheaper; else ``(None, V)``.
+
+    ``V``'s rank is at most the tensor's sample-mode rank, not ``A``: each residual core is the
+    HOSVD core contracted with its sample's row of ``U_S`` (000 Eq. 4), and the trend planes
+    are linear combinations of the residual cores (a least-squares fit over the samples). The
+    default model's level 0 has ``A = 77`` rows of rank 58 (singular values fall from 4e-2 to
+    5e-9 of the largest there, float rounding of the stored cores), so the per-agent core GEMM
+    of the crowd step shrinks from 92,400 to 74,066 multiply-adds; levels 1–5 (rank 27 … 9)
+    shrink 2–4×. The rank threshold (:data:`FACTOR_RTOL`) sits in that gap; the factors come
+    from a float64 SVD, ``M = U Σ``, ``W = Vᵀ`` (orthonormal rows, so ``W``'s float32 rounding is
+    not amplified).
+    """
+    a, rr = v.shape
+    u, sv, wt = np.linalg.svd(v, full_matrices=False)
+    q = int(np.sum(sv > FACTOR_RTOL * sv[0])) if sv.size and sv[0] > 0 else 0
+    if q == 0 or q * (a + rr) >= a * rr:
+        return None, v
+    return u[:, :q] * sv[:q], wt[:q]
 
 
 def build_decoders(model: MotionModel) -> Decoders:
@@ -217,7 +259,10 @@ def clip_weights(decoders: Decoders, c: Float[Array, " d"]) -> Float[Array, " A"
 
 
 def clip_core(level: LevelDecoder, a: Float[Array, " A"]) -> Float[Array, "RP RT"]:
-    """The clip's core ``K(c) = a V`` at a level (000 Eq. 8), for one agent."""
+    """The clip's core ``K(c) = a V`` at a level (000 Eq. 8), for one agent: ``(a M) W`` when
+    the level's ``V`` is stored factored (:func:`_factor_cores`)."""
+    if level.mix_basis is not None:
+        a = jnp.dot(a, level.mix_basis, precision=_HI)
     return jnp.dot(a, level.cores, precision=_HI).reshape(level.ranks)
 
 

@@ -6,13 +6,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from jcrowd import load_default_model
 from jcrowd.model import level_pose_vectors
 from jcrowd.posevec import decode_pose_vectors
 from jcrowd.skeleton import end_site_positions, forward_kinematics
 from jcrowd.synthesis import (
+    _factor_cores,
     build_decoders,
+    clip_core,
     clip_weights,
     decode_coeffs,
     level_points,
@@ -107,3 +111,58 @@ def test_coarse_level_keeps_bone_lengths(setup):
         if p >= 0:
             length = np.linalg.norm(pts[i] - pts[p])
             assert length == pytest.approx(np.linalg.norm(rest[i]), abs=1e-5)
+
+
+def _stored_cores(model, level):
+    """``V`` as the model file holds it: residual cores, then trend planes (float64)."""
+    k = model.levels[level].kriging
+    v = np.concatenate([np.asarray(k.residuals, np.float64), np.asarray(k.trend, np.float64)])
+    return v.reshape(v.shape[0], -1)
+
+
+@pytest.mark.parametrize("level", [0, 3, 5])
+def test_factored_cores_reproduce_the_stored_cores(setup, level):
+    """``V = M W`` (synthesis._factor_cores) holds to float32 rounding, and the core of a clip
+    through the factors equals ``a V`` computed in float64 from the model file."""
+    model, dec = setup
+    lv = dec.levels[level]
+    v = _stored_cores(model, level)
+    assert lv.mix_basis is not None  # the default model's V is low rank at every level
+    assert lv.mix_basis.shape[1] < v.shape[0]
+    scale = np.abs(v).max()
+    # Two float32 factors (entries ~|V|) multiplied in float32: ~1e-6 of the largest entry.
+    np.testing.assert_allclose(np.asarray(lv.mix_cores()), v, atol=2e-6 * scale)
+    a = clip_weights(dec, jnp.asarray([0.05, 1.1, -0.3], jnp.float32))
+    core = np.asarray(clip_core(lv, a)).ravel()
+    oracle = np.asarray(a, np.float64) @ v
+    np.testing.assert_allclose(core, oracle, atol=2e-6 * np.abs(a).sum() * scale)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    st.integers(2, 12),
+    st.integers(1, 12),
+    st.integers(20, 60),
+    st.integers(0, 2**31 - 1),
+)
+def test_factor_cores_finds_the_rank(rows, rank, cols, seed):
+    """A product of random ``(A, q)`` and ``(q, RR)`` factors is found to have rank ``min(q,
+    A)``, and the factors multiply back to it; when factoring would not save work it is left
+    whole."""
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(rows, rank)) @ rng.normal(size=(rank, cols))
+    q = min(rank, rows)
+    basis, cores = _factor_cores(v)
+    if q * (rows + cols) >= rows * cols:
+        assert basis is None
+        np.testing.assert_array_equal(cores, v)
+    else:
+        assert basis is not None
+        assert basis.shape == (rows, q) and cores.shape == (q, cols)
+        np.testing.assert_allclose(basis @ cores, v, atol=1e-9 * np.abs(v).max())
+
+
+def test_full_rank_cores_stay_whole():
+    v = np.random.default_rng(0).normal(size=(6, 40))
+    basis, cores = _factor_cores(v)
+    assert basis is None and cores is v
