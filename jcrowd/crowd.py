@@ -206,18 +206,20 @@ def _agent_level(
     return pts, dtau, dyaw, dpos
 
 
-CHUNK_CORE_FLOATS = 1 << 20
-"""A chunk's cores (one per slot) stay under this many floats (4 MB, about what this CPU's
-caches hold) unless that would make chunks smaller than ``StepConfig.chunk``."""
+CHUNK_CORE_FLOATS = 5 << 19
+"""A chunk's cores (one per slot) stay under this many floats (10 MB) unless that would make
+chunks smaller than ``StepConfig.chunk``."""
 
 
 def bucket_chunk(capacity: int, chunk: int, core_floats: int = 0) -> int:
     """Chunk size for a bucket of ``capacity`` slots: at least ``chunk``, at most 8 chunks (every
     chunk pays each of its ops' dispatch once — ~2,600 ops per step at 100k on XLA:CPU — so a
     big level takes bigger chunks), but no chunk whose ``core_floats``-float cores pass
-    :data:`CHUNK_CORE_FLOATS`. That caps level 0 (1,200-float cores) at 873 slots: full detail
-    over 100k agents on 2 devices ran at 8.0–8.8 × 10⁵ agent-frames/s in 6,250-slot chunks, at
-    8.8–9.3 × 10⁵ in 1,024-slot ones (the cores went through memory, not cache)."""
+    :data:`CHUNK_CORE_FLOATS`. That caps level 0 (1,200-float cores) at 2,184 slots. Full
+    detail over 100k agents on 2 devices (agent-frames/s, three interleaved runs each): chunks
+    of 6,250 slots (no cap) 9.0–9.7 × 10⁵, 4,096 8.3–9.1, 2,048 9.9–10.0, 1,536 9.7–10.0, 1,024
+    9.5–9.9, 873 (the cap before the cores were factored) 8.8–9.1 × 10⁵.
+    """
     size = max(chunk, -(-capacity // 8))
     if core_floats > 0:
         size = min(size, max(chunk, CHUNK_CORE_FLOATS // core_floats))
