@@ -143,6 +143,28 @@ def test_fk_numpy_in_numpy_out():
     assert isinstance(gpos, np.ndarray) and gpos.dtype == np.float64
 
 
+def test_fk_of_a_root_only_skeleton():
+    """One joint: no bones, the position is the root's plus its offset (NumPy and jax)."""
+    skel = random_skeleton((-1,), 5)
+    q, root = random_quats(6, (3, 1)), np.arange(9.0).reshape(3, 3)
+    for rot, pos in (forward_kinematics(skel, q, root), fk_jit(skel, q, root)):
+        np.testing.assert_allclose(np.asarray(rot), q, atol=1e-7)
+        np.testing.assert_allclose(np.asarray(pos)[:, 0], root + skel.offsets[0], atol=1e-6)
+
+
+def test_path_matrix_marks_each_joints_ancestors():
+    """Row j of the path matrix sums the bones from the root to j: on a branchy tree, the 1s
+    of row j are exactly j and its ancestors (the root excluded)."""
+    skel = random_skeleton(BRANCHY, 7)
+    a = skel.path_matrix
+    for j in range(len(BRANCHY)):
+        path, k = set(), j
+        while k > 0:
+            path.add(k)
+            k = BRANCHY[k]
+        assert set(np.flatnonzero(a[j]) + 1) == path
+
+
 def test_rest_positions_match_loop_and_identity_fk():
     skel = random_skeleton(BRANCHY, 5, n_end=3)
     pos, ends = rest_positions(skel)
