@@ -10,9 +10,9 @@ cores and the trend planes (000 Eq. 8), and the pose vector at aligned frame ``�
 Per agent-frame: ``K(c) = a V`` (``A × R_P R_T``; under ``vmap`` one GEMM for a whole bucket;
 ``V`` is stored as two factors of its rank, :func:`_factor_cores`), ``w_T(τ)`` from two rows of
 ``U_T``, ``g = K w_T`` and ``y = U_P g``. No per-agent core is kept between steps (a full-level
-core per agent at 100k agents would be 480 MB, DESIGN §5; and reading a cached core costs about
-what computing it does here: 16k level-0 agents per device read theirs at ~9 GB/s, 8.8 ms, vs
-8.4 ms for the factored GEMM). Measured on this 2-core CPU at 100k agents, level 5: 10 ms this
+core per agent at 100k agents would be 480 MB, DESIGN §5; and decoding from cached cores was
+no faster in the step's chunks: 32k level-0 agents on two devices 34.8 ms vs 35.6 ms computing
+them, the cores read from memory at ~9 GB/s). Measured on this 2-core CPU at 100k agents, level 5: 10 ms this
 way vs 161 ms for gathering two rows of a precomputed ``V U_Tᵀ`` table per agent (XLA's CPU
 gather materialises every row).
 
