@@ -12,9 +12,9 @@ Per agent-frame: ``K(c) = a V`` (``A × R_P R_T``; under ``vmap`` one GEMM for a
 ``U_T``, ``g = K w_T`` and ``y = U_P g``. No per-agent core is kept between steps (a full-level
 core per agent at 100k agents would be 480 MB, DESIGN §5; and decoding from cached cores was
 no faster in the step's chunks: 32k level-0 agents on two devices 34.8 ms vs 35.6 ms computing
-them, the cores read from memory at ~9 GB/s). Measured on this 2-core CPU at 100k agents, level 5: 10 ms this
-way vs 161 ms for gathering two rows of a precomputed ``V U_Tᵀ`` table per agent (XLA's CPU
-gather materialises every row).
+them, the cores read from memory at ~9 GB/s). Measured on this 2-core CPU at 100k agents,
+level 5: 10 ms this way vs 161 ms for gathering two rows of a precomputed ``V U_Tᵀ`` table per
+agent (XLA's CPU gather materialises every row).
 
 Forward kinematics runs on the level's *kept* joints only: a dropped joint keeps its reference
 rotation, so the chain from a kept joint's nearest kept ancestor is a constant rotation and
