@@ -429,6 +429,7 @@ def _schedule(
             num_waypoints=state.num_waypoints,
             loop=state.loop,
             waypoint=wp,
+            interleave=state.interleave,
         ),
         deferred,
     )

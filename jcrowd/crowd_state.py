@@ -51,6 +51,9 @@ class CrowdState(eqx.Module):
     num_waypoints: Int[Array, " N"]
     loop: Bool[Array, " N"]
     waypoint: Int[Array, " N"]  # index of the waypoint being walked to
+    # Devices whose blocks hold the agents interleaved (jcrowd.simulate.shard_state): with K > 1
+    # position p of every array is agent agent_order(N, K)[p], not agent p.
+    interleave: int = eqx.field(static=True, default=1)
 
     @property
     def num_agents(self) -> int:

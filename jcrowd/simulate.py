@@ -35,7 +35,9 @@ from jcrowd.scenario_spawn import Spawn, spawn
 __all__ = [
     "Simulation",
     "agent_mesh",
+    "agent_order",
     "check_divisible",
+    "in_agent_order",
     "on_all_devices",
     "per_device_config",
     "prepare",
@@ -173,6 +175,32 @@ def agent_mesh() -> Any:
     return Mesh(np.array(jax.devices()), ("agents",))
 
 
+def agent_order(agents: int, devices: int) -> np.ndarray:
+    """The agent at each position of a state split over ``devices`` (:func:`shard_state`):
+    device ``k``'s block holds agents ``k, k + K, k + 2K, …``.
+
+    Interleaved rather than contiguous because the LOD budget is per device
+    (:func:`per_device_config`) and scenarios spawn group by group: with contiguous blocks a
+    group near the camera sat in one device's block and overflowed its share of the near levels
+    while the other device's went unused (``examples/plaza.toml`` on two devices: 27 agents at
+    level 0 instead of 43).
+    """
+    check_divisible(agents, devices)
+    per = agents // devices
+    return (np.arange(per)[None, :] * devices + np.arange(devices)[:, None]).reshape(-1)
+
+
+def in_agent_order(x: Any, state: CrowdState) -> np.ndarray:
+    """A host copy of a per-agent array of ``state`` (or of a frame stepped from it: ``level``,
+    ``dots``), agent axis first, put in agent order."""
+    host = np.asarray(x)
+    if state.interleave == 1:
+        return host
+    out = np.empty_like(host)
+    out[agent_order(host.shape[0], state.interleave)] = host
+    return out
+
+
 def check_divisible(agents: int, devices: int) -> None:
     """The agent axis splits into equal blocks, one per device."""
     if agents % devices:
@@ -203,13 +231,13 @@ def _per_device_step(crowd: CrowdModel, config: StepConfig, devices: list[Any]) 
     """The step over several devices: each runs it on its own block of agents.
 
     ``shard_map`` over a one-axis mesh ``agents`` (the mesh :func:`shard_state` places the state
-    on): device ``k`` steps agents ``[k·n, (k+1)·n)`` with :func:`per_device_config`'s share of
-    every budget, so no data moves between devices inside a step except the two counters
-    (summed). The LOD budget is therefore per device: a device whose block holds more near
-    agents than its share of a level's capacity places the excess coarser even if another
-    device has room (with agents spread evenly this rarely binds: the plaza bench fills the
-    same levels either way). A frame's level-``l`` bucket is the devices' buckets one after
-    the other (global agent ids; each block's valid slots lead within it).
+    on): device ``k`` steps its block — agents ``k, k + K, …`` (:func:`agent_order`) — with
+    :func:`per_device_config`'s share of every budget, so no data moves between devices inside
+    a step except the two counters (summed). The LOD budget is therefore per device: a device
+    whose block holds more near agents than its share of a level's capacity places the excess
+    coarser even if another device has room (interleaved blocks sample the whole crowd, so
+    this rarely binds). A frame's level-``l`` bucket is the devices' buckets one after the
+    other (agent ids; each block's valid slots lead within it).
 
     Why not one global program partitioned by XLA: the step's compactions (``nonzero``,
     ``top_k``, scatters over the agent axis) then need the whole axis on every device; on
@@ -226,9 +254,9 @@ def _per_device_step(crowd: CrowdModel, config: StepConfig, devices: list[Any]) 
     def local(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
         new, frame = step(crowd, local_config, state, view, dt)
         n_local = state.num_agents
-        offset = jax.lax.axis_index("agents") * n_local
-        slots = tuple(
-            jnp.where(ok, s + offset, n_local * k).astype(s.dtype)
+        device = jax.lax.axis_index("agents")
+        slots = tuple(  # local slot s holds agent s·K + k (agent_order)
+            jnp.where(ok, s * k + device, n_local * k).astype(s.dtype)
             for s, ok in zip(frame.slots, frame.valid, strict=True)
         )
         total = (jax.lax.psum(frame.overflow, "agents"), jax.lax.psum(frame.deferred, "agents"))
@@ -248,6 +276,12 @@ def _per_device_step(crowd: CrowdModel, config: StepConfig, devices: list[Any]) 
 
     def run(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
         check_divisible(state.num_agents, k)
+        if state.interleave != k:
+            raise ScenarioError(
+                f"sharding: expected a state placed on the {k} devices by "
+                f"jcrowd.simulate.shard_state (agents interleaved over them), found one laid "
+                f"out for {state.interleave} device(s)"
+            )
         return mapped(state, view, dt)
 
     return run
@@ -304,7 +338,10 @@ def shard_state(state: CrowdState) -> CrowdState:
 
     One device: unchanged. Several (``XLA_FLAGS=--xla_force_host_platform_device_count=K`` on
     CPU, several GPUs, or several processes after ``jax.distributed.initialize``): a one-axis
-    mesh ``agents`` over ``jax.devices()``; each process feeds its own contiguous block of agents
+    mesh ``agents`` over ``jax.devices()``, device ``k`` holding agents ``k, k + K, …``
+    (:func:`agent_order`; the state's ``interleave`` records ``K``, and per-agent arrays read
+    back from it or from its frames go through :func:`in_agent_order`; frames' slot ids are
+    agent ids). Each process feeds its own devices' blocks
     (``jax.make_array_from_process_local_data``). Every process builds the same initial state
     (spawning is deterministic from the seed), so no data is sent at start.
     """
@@ -314,17 +351,17 @@ def shard_state(state: CrowdState) -> CrowdState:
     if len(devices) == 1:
         return state
     n = state.num_agents
-    check_divisible(n, len(devices))
+    order = agent_order(n, len(devices))
     sharding = NamedSharding(agent_mesh(), PartitionSpec("agents"))
     procs, me = jax.process_count(), jax.process_index()
     per = n // procs
 
     def place(x: jax.Array) -> jax.Array:
-        host = np.asarray(x)
+        host = np.asarray(x)[order]
         if procs == 1:
             return jax.device_put(host, sharding)
         return jax.make_array_from_process_local_data(
             sharding, host[me * per : (me + 1) * per], host.shape
         )
 
-    return jax.tree.map(place, state)
+    return replace(jax.tree.map(place, state), interleave=len(devices))

@@ -219,21 +219,31 @@ SHARDED = textwrap.dedent(
     import jax, jax.numpy as jnp, numpy as np
     from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
     from jcrowd import load_default_model
+    from jcrowd.errors import JcrowdError
     from jcrowd.scenario import parse_scenario
-    from jcrowd.simulate import prepare
+    from jcrowd.simulate import in_agent_order, prepare, shard_state
     text = sys.stdin.read()
     sim, state = prepare(parse_scenario(text, "t.toml"), load_default_model())
-    if len(jax.devices()) > 1:
-        mesh = Mesh(np.array(jax.devices()), ("agents",))
-        state = jax.tree.map(
-            lambda x: jax.device_put(x, NamedSharding(mesh, P("agents"))), state)
     fn = sim.compiled()
+    refused = None
+    if len(jax.devices()) > 1:
+        # A state split in contiguous blocks by hand is refused: the step's agent ids assume
+        # shard_state's interleaved blocks.
+        mesh = Mesh(np.array(jax.devices()), ("agents",))
+        by_hand = jax.tree.map(
+            lambda x: jax.device_put(x, NamedSharding(mesh, P("agents"))), state)
+        try:
+            fn(by_hand, sim.view_at(0.0), sim.dt)
+        except JcrowdError as e:
+            refused = str(e)
+    state = shard_state(state)
     for i in range(5):
         state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
     out = {"devices": len(jax.devices()),
            "shards": len(state.position.sharding.device_set),
-           "position": np.asarray(state.position).tolist(),
-           "tau": np.asarray(state.tau).tolist()}
+           "refused": refused,
+           "position": in_agent_order(state.position, state).tolist(),
+           "tau": in_agent_order(state.tau, state).tolist()}
     print(json.dumps(out))
     """
 )
@@ -258,6 +268,7 @@ def _run_sharded(devices):
 def test_sharded_over_four_devices_equals_one():
     one, four = _run_sharded(1), _run_sharded(4)
     assert four["devices"] == 4 and four["shards"] == 4
+    assert "shard_state" in four["refused"]
     # Same float32 program partitioned over devices: reductions may reorder, 1e-5 (issue 7).
     np.testing.assert_allclose(four["position"], one["position"], atol=1e-5)
     np.testing.assert_allclose(four["tau"], one["tau"], atol=1e-5)

@@ -1,9 +1,10 @@
 """The step split over several devices (``jcrowd.simulate._per_device_step``).
 
-Oracle: the split step on ``K`` devices equals the one-device step run on each block of agents
-separately with :func:`~jcrowd.simulate.per_device_config`'s share of the budget, the blocks'
-frames joined with global agent ids and the counters summed — including when the budget binds.
-When it does not bind, it also equals the one-device step on the whole crowd.
+Oracle: the split step on ``K`` devices equals the one-device step run on each device's block
+of agents (agents ``k, k + K, …``: :func:`~jcrowd.simulate.agent_order`) separately with
+:func:`~jcrowd.simulate.per_device_config`'s share of the budget, the blocks' frames joined with
+agent ids and the counters summed — including when the budget binds. When it does not bind, it
+also equals the one-device step on the whole crowd.
 
 Tolerance 1e-5 (m, and aligned frames for τ): the same float32 program per agent; XLA may
 fuse or order a block's arithmetic differently from the whole crowd's.
@@ -17,6 +18,7 @@ import subprocess
 import sys
 import textwrap
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -24,7 +26,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from jcrowd.crowd import StepConfig
-from jcrowd.simulate import per_device_config
+from jcrowd.simulate import agent_order, in_agent_order, per_device_config
 
 SCENE = """
 model = "default"
@@ -53,7 +55,7 @@ SCRIPT = textwrap.dedent(
     import jax, jax.numpy as jnp, numpy as np
     from jcrowd import load_default_model
     from jcrowd.scenario import parse_scenario
-    from jcrowd.simulate import per_device_config, prepare, shard_state
+    from jcrowd.simulate import in_agent_order, per_device_config, prepare, shard_state
     mode, caps, text = sys.argv[1], json.loads(sys.argv[2]), sys.stdin.read()
     sim, state = prepare(parse_scenario(text, "t.toml"), load_default_model())
     if caps:
@@ -66,46 +68,51 @@ SCRIPT = textwrap.dedent(
             state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
         return state, frame
 
-    def record(state, frame, offset, n_total):
+    def record(state, frame, ids, n_total):
+        # Per-agent arrays in agent order (ids[i]: the agent at row i), points keyed by agent id.
         pts = {}
         for lv, (s, ok, p) in enumerate(zip(frame.slots, frame.valid, frame.points)):
             s, ok, p = np.asarray(s), np.asarray(ok), np.asarray(p)
             assert (s[~ok] == n_total).all()
             for i in np.flatnonzero(ok):
-                pts[str(int(s[i]) + offset)] = [lv, p[i].tolist()]
-        return {"x": np.asarray(state.x).tolist(), "tau": np.asarray(state.tau).tolist(),
-                "level": np.asarray(frame.level).tolist(), "dots": np.asarray(frame.dots).tolist(),
-                "overflow": int(frame.overflow), "deferred": int(frame.deferred), "points": pts}
+                pts[str(int(ids[int(s[i])]))] = [lv, p[i].tolist()]
+        per = {k: in_agent_order(v, state) for k, v in
+               (("x", state.x), ("tau", state.tau), ("level", frame.level), ("dots", frame.dots))}
+        return {**{k: v.tolist() for k, v in per.items()}, "overflow": int(frame.overflow),
+                "deferred": int(frame.deferred), "points": pts}
 
+    everyone = np.arange(n)
     if mode == "split":
         state, frame = run(sim, shard_state(state))
-        out = record(state, frame, 0, n)
+        out = record(state, frame, everyone, n)
         out["devices"] = len(jax.devices())
         out["shards"] = len(state.x.sharding.device_set)
     elif mode == "whole":
-        out = record(*run(sim, state), 0, n)
-    else:  # "blocks": the one-device step on each half with its share of the budget
-        half = n // 2
+        out = record(*run(sim, state), everyone, n)
+    else:  # "blocks": the one-device step on each device's agents with its share of the budget
         sim_b = replace(sim, config=per_device_config(sim.config, 2))
-        parts = []
+        out = {k: [None] * n for k in ("x", "tau", "level", "dots")}
+        out.update(overflow=0, deferred=0, points={})
         for b in range(2):
-            block = jax.tree.map(lambda x: x[b * half:(b + 1) * half], state)
-            parts.append(record(*run(sim_b, block), b * half, half))
-        out = {k: parts[0][k] + parts[1][k] for k in ("x", "tau", "level", "dots")}
-        out["overflow"] = parts[0]["overflow"] + parts[1]["overflow"]
-        out["deferred"] = parts[0]["deferred"] + parts[1]["deferred"]
-        out["points"] = {**parts[0]["points"], **parts[1]["points"]}
+            ids = everyone[b::2]  # agents b, b + 2, ... (agent_order)
+            part = record(*run(sim_b, jax.tree.map(lambda x: x[ids], state)), ids, n // 2)
+            for k in ("x", "tau", "level", "dots"):
+                for i, v in zip(ids, part[k]):
+                    out[k][i] = v
+            out["overflow"] += part["overflow"]
+            out["deferred"] += part["deferred"]
+            out["points"].update(part["points"])
     print(json.dumps(out))
     """
 )
 
 
-def _run(mode: str, devices: int, caps: list[int] | None = None) -> dict:
+def _run(mode: str, devices: int, caps: list[int] | None = None, scene: str = SCENE) -> dict:
     env = dict(os.environ, JAX_PLATFORMS="cpu")
     env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
     out = subprocess.run(
         [sys.executable, "-c", SCRIPT, mode, json.dumps(caps or [])],
-        input=SCENE,
+        input=scene,
         env=env,
         capture_output=True,
         text=True,
@@ -142,6 +149,57 @@ def test_split_equals_whole_crowd_when_nothing_overflows() -> None:
     split, whole = _run("split", 2), _run("whole", 1)
     assert whole["overflow"] == 0
     _same(split, whole)
+
+
+# Two groups spawned one after the other: agents 0–199 near the camera, 200–399 far from it.
+# Split in contiguous blocks, every near agent would sit on device 0.
+GROUPED = """
+model = "default"
+seed = 9
+duration = 10.0
+fps = 30
+[ground]
+center = [0, 0]
+size = [400, 400]
+[camera]
+eye = [0, 1.7, -20]
+target = [0, 1.0, 0]
+fov = 60
+[[groups]]
+name = "near"
+count = 200
+spawn = { shape = "rect", center = [0, 0], size = [16, 8] }
+path = { waypoints = [[0, 150]], loop = false }
+[[groups]]
+name = "far"
+count = 200
+spawn = { shape = "rect", center = [0, 140], size = [16, 8] }
+path = { waypoints = [[0, 190]], loop = false }
+"""
+
+
+def test_grouped_near_agents_fill_the_near_levels_as_on_one_device() -> None:
+    """With agents interleaved over the devices, each device's share of level 0 serves near
+    agents: 100 level-0 slots, 200 near agents — one device places 100 at level 0, two devices
+    (64 slots each: a share is at least one 64-slot chunk) place 128, all near agents. In
+    contiguous blocks all 200 near agents would sit on device 0, which would place 64."""
+    caps = [100, 100, 100, 100, 200, 400]
+    split, whole = _run("split", 2, caps, GROUPED), _run("whole", 1, caps, GROUPED)
+    level0 = [sum(1 for v in run["level"] if v == 0) for run in (split, whole)]
+    assert level0 == [128, 100]
+    assert {int(k) for k, (lv, _) in split["points"].items() if lv == 0} <= set(range(200))
+
+
+@given(st.integers(1, 40), st.integers(1, 6))
+def test_agent_order_interleaves_and_in_agent_order_inverts(per: int, devices: int) -> None:
+    n = per * devices
+    order = agent_order(n, devices)
+    assert sorted(order.tolist()) == list(range(n))  # a permutation
+    for k in range(devices):  # device k's block: agents k, k + K, ...
+        assert order[k * per : (k + 1) * per].tolist() == list(range(k, n, devices))
+    placed = np.arange(n)[order] * 10  # a per-agent array as shard_state lays it out
+    layout = SimpleNamespace(interleave=devices)
+    np.testing.assert_array_equal(in_agent_order(placed, layout), np.arange(n) * 10)  # type: ignore[arg-type]
 
 
 @given(

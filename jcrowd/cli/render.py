@@ -119,7 +119,7 @@ def render_scenario(
     from rich.progress import Progress
 
     from jcrowd.render import CrowdRenderer, LevelInstances, write_png
-    from jcrowd.simulate import prepare, shard_state
+    from jcrowd.simulate import in_agent_order, prepare, shard_state
     from jcrowd.synthesis import point_parents
 
     sim, state = prepare(scenario, model)
@@ -151,10 +151,13 @@ def render_scenario(
             task = bar.add_task(f"rendering {n_frames} frames", total=n_frames)
             for i in range(n_frames):
                 t = time.perf_counter()
-                xz = np.asarray(state.position)  # the frame is the step's start; state is donated
+                # The frame is the step's start; the state is donated. Per-agent arrays come back
+                # in agent order (agents are interleaved over several devices).
+                xz = in_agent_order(state.position, state)
+                stepped = state
                 state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt_array)
                 host = jax.device_get((frame.slots, frame.valid, frame.points))
-                dots = np.asarray(frame.dots)
+                dots = in_agent_order(frame.dots, stepped)
                 step_ms.append(1e3 * (time.perf_counter() - t))
                 t = time.perf_counter()
                 levels = [

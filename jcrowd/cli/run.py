@@ -211,12 +211,20 @@ def save_recording(path: str | Path, recording: dict[str, np.ndarray]) -> Path:
     return Path(path)
 
 
+PER_AGENT = frozenset(
+    ("position", "heading", "alive", "tau", "control", "control_next", "has_next", "level", "dots")
+)
+"""Recorded arrays with one row per agent (the others are per camera or per bucket slot)."""
+
+
 def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, Any], dict]:
     """Run ``steps`` steps with a progress bar; return the JSON summary and the recording."""
     import jax
     import jax.numpy as jnp
     from rich.console import Console
     from rich.progress import Progress
+
+    from jcrowd.simulate import in_agent_order
 
     step = sim.compiled()
     n = sim.num_agents
@@ -278,6 +286,8 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
                     }
                 )
             host.update(_fetch(parts))
+            for key in PER_AGENT.intersection(host):  # agents may be interleaved over devices
+                host[key] = in_agent_order(host[key], new)
             overflow += int(host.pop("overflow"))
             deferred += int(host.pop("deferred"))
             for key, value in host.items():
