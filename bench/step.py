@@ -192,7 +192,8 @@ def roof_bytes(state: Any, frame: Any, refresh: int) -> int:
     """Bytes a step must read and write (module doc)."""
     n = state.num_agents
     rowwise = ("mix", "waypoints", "far_core")  # touched only in the rows a step uses
-    per_step = sum(x.nbytes for k, x in vars(state).items() if k not in rowwise)
+    arrays = {k: x for k, x in vars(state).items() if isinstance(x, jax.Array)}
+    per_step = sum(x.nbytes for k, x in arrays.items() if k not in rowwise)
     mix_row = state.mix.nbytes // n  # both clip slots of one agent
     slots = sum(int(p.shape[0]) for p in frame.points)
     points = sum(int(np.prod(p.shape)) * 4 for p in frame.points)
