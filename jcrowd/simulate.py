@@ -175,6 +175,7 @@ def agent_mesh() -> Any:
     return Mesh(np.array(jax.devices()), ("agents",))
 
 
+@functools.cache
 def agent_order(agents: int, devices: int) -> np.ndarray:
     """The agent at each position of a state split over ``devices`` (:func:`shard_state`):
     device ``k``'s block holds agents ``k, k + K, k + 2K, …``.
@@ -187,7 +188,9 @@ def agent_order(agents: int, devices: int) -> np.ndarray:
     """
     check_divisible(agents, devices)
     per = agents // devices
-    return (np.arange(per)[None, :] * devices + np.arange(devices)[:, None]).reshape(-1)
+    order = (np.arange(per)[None, :] * devices + np.arange(devices)[:, None]).reshape(-1)
+    order.flags.writeable = False  # cached: built once per (agents, devices), not per read-back
+    return order
 
 
 def in_agent_order(x: Any, state: CrowdState) -> np.ndarray:

@@ -154,10 +154,9 @@ def render_scenario(
                 # The frame is the step's start; the state is donated. Per-agent arrays come back
                 # in agent order (agents are interleaved over several devices).
                 xz = in_agent_order(state.position, state)
-                stepped = state
                 state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt_array)
                 host = jax.device_get((frame.slots, frame.valid, frame.points))
-                dots = in_agent_order(frame.dots, stepped)
+                dots = in_agent_order(frame.dots, state)
                 step_ms.append(1e3 * (time.perf_counter() - t))
                 t = time.perf_counter()
                 levels = [
