@@ -1,8 +1,8 @@
 """Benchmark: exact vs multiscale DTW (paper 004 §3.2), with dtaidistance side by side.
 
 Data (``--sequences cycles``, the default): gait cycles (two steps from a left heel strike,
-:func:`jcrowd.gait.gait_cycles`) of the shared CMU walks, subject 07 for sequence A and subject
-08 for sequence B, ``K ≈ frames / 130`` cycles each (cycling through the list when short),
+:func:`jcrowd.motion.gait.gait_cycles`) of the shared CMU walks, subject 07 for sequence A and
+subject 08 for sequence B, ``K ≈ frames / 130`` cycles each (cycling through the list when short),
 concatenated, then linearly resampled to ``frames`` (A) and ``1.1 · frames`` (B) frames — two
 long walks with the same number of steps in the same order, as in paper 004's Figure 2
 (two walks of six steps). ``--sequences clips`` instead concatenates whole clips and cuts both
@@ -48,9 +48,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import append_result, data_root, machine
 
 from jcrowd.align import dtw, multiscale_dtw, physics_features, pose_features
-from jcrowd.gait import gait_cycles
-from jcrowd.io.bvh import read_bvh
-from jcrowd.motion import drop_tpose_frames
+from jcrowd.io import read_bvh
+from jcrowd.motion import drop_tpose_frames, gait_cycles
 
 SIZES = (300, 1000, 3000)
 

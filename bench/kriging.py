@@ -1,6 +1,6 @@
 """Benchmark of kriging (papers 000 §3.3, 001): cross-validated accuracy, throughput, fit time.
 
-- Leave-one-clip-out at level 0 on ``cmu/walk`` and ``cmu16`` (:mod:`jcrowd.evaluate`): mean
+- Leave-one-clip-out at level 0 on ``cmu/walk`` and ``cmu16`` (:mod:`jcrowd.model.evaluate`): mean
   and max joint error in the root frame, end-of-cycle root error, and foot skate (per-frame
   slide of a planted foot at the model rate, cm) for tensor kriging, paper 001's per-pose and
   per-element kriging of whole aligned motions, RBF and nearest. ``skate_cm`` is the delivered
@@ -37,10 +37,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import data_root, machine, report
 
 from jcrowd.cli import main as jcrowd_main
-from jcrowd.data import load_dataset
-from jcrowd.evaluate import ALL_METHODS, leave_one_clip_out
+from jcrowd.io import load_dataset
 from jcrowd.kriging import fit_kriging, kriging_weights_batch, make_variogram
-from jcrowd.tensor_model import build_tensor_model
+from jcrowd.model import ALL_CV_METHODS, build_tensor_model, leave_one_clip_out
 
 
 def _median(fn: Any, repeats: int) -> float:
@@ -91,17 +90,17 @@ def main() -> None:
     ap.add_argument("--no-record", action="store_true")
     args = ap.parse_args()
     data = data_root()
-    names = {m: NAMES.get(m, m) for m in ALL_METHODS}
+    names = {m: NAMES.get(m, m) for m in ALL_CV_METHODS}
     cv, cv_max, cv_root, skate, skate_raw = {}, {}, {}, {}, {}
     for name, folder in (("cmu/walk", data / "cmu" / "walk"), ("cmu16", data / "cmu16")):
         tensor = build_tensor_model(load_dataset(folder))
-        res = leave_one_clip_out(tensor, methods=ALL_METHODS, skate=True)
-        cv[name] = {names[m]: res[m]["joint_m"] for m in ALL_METHODS}
-        cv_max[name] = {names[m]: res[m]["max_joint_m"] for m in ALL_METHODS}
-        cv_root[name] = {names[m]: res[m]["root_m"] for m in ALL_METHODS}
-        skate[name] = {names[m]: res[m]["skate_cm"] for m in ALL_METHODS}
+        res = leave_one_clip_out(tensor, methods=ALL_CV_METHODS, skate=True)
+        cv[name] = {names[m]: res[m]["joint_m"] for m in ALL_CV_METHODS}
+        cv_max[name] = {names[m]: res[m]["max_joint_m"] for m in ALL_CV_METHODS}
+        cv_root[name] = {names[m]: res[m]["root_m"] for m in ALL_CV_METHODS}
+        skate[name] = {names[m]: res[m]["skate_cm"] for m in ALL_CV_METHODS}
         skate[name]["captures"] = res["captures"]["skate_cm"]
-        skate_raw[name] = {names[m]: res[m]["skate_raw_cm"] for m in ALL_METHODS}
+        skate_raw[name] = {names[m]: res[m]["skate_raw_cm"] for m in ALL_CV_METHODS}
         if name == "cmu16":
             tp = throughput(tensor.controls, args.repeats)
     t = time.perf_counter()
@@ -128,7 +127,7 @@ def main() -> None:
 
 
 NAMES = {"kriging": "tensor_kriging"}
-"""JSON names of :func:`jcrowd.evaluate.leave_one_clip_out` methods (the issue's keys)."""
+"""JSON names of :func:`jcrowd.model.evaluate.leave_one_clip_out` methods (the issue's keys)."""
 
 
 def _table(out: dict[str, Any]) -> str:

@@ -1,6 +1,6 @@
 """Benchmark of the headless renderer (DESIGN §6; paper 003 §6.4): ms per frame vs agents.
 
-Scene: ``N`` procedural walkers (:func:`jcrowd.walker.procedural_walk`, one gait cycle at
+Scene: ``N`` procedural walkers (:func:`jcrowd.motion.walker.procedural_walk`, one gait cycle at
 30 fps, each agent a random frame of it turned by a random yaw) on a square grid 1.5 m apart,
 every agent at level 0 (the full 19-joint skeleton, 18 capsules of 144 triangles): the worst
 case, with no LOD. The camera frames the whole grid from above and in front
@@ -36,6 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import append_result, machine
 
+from jcrowd.motion import forward_kinematics, procedural_walk
 from jcrowd.render import (
     LEVEL_COLORS,
     CrowdRenderer,
@@ -47,8 +48,6 @@ from jcrowd.render import (
     write_png,
 )
 from jcrowd.render.meshes import capsule_detail, capsule_mesh
-from jcrowd.skeleton import forward_kinematics
-from jcrowd.walker import procedural_walk
 
 SPACING = 1.5  # m between neighbouring agents on the grid
 

@@ -19,7 +19,7 @@ import step as step_bench
 from repro_common import median_s, save_figure
 
 from jcrowd import load_default_model
-from jcrowd.synthesis import (
+from jcrowd.crowd import (
     Decoders,
     build_decoders,
     clip_weights,
@@ -27,7 +27,7 @@ from jcrowd.synthesis import (
     level_points,
     pose_from_coeffs,
 )
-from jcrowd.tensor_model import level_errors, storage
+from jcrowd.model import level_errors, storage
 
 
 def decode_times(dec: Decoders, agents: int, repeats: int, *, fk_only: bool = False) -> list[float]:

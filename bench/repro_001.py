@@ -1,6 +1,6 @@
 """Paper 001 (Mukai & Kuriyama, geostatistical motion interpolation): Table 1 and §5.2.
 
-Per dataset: leave-one-clip-out accuracy of every method (:func:`jcrowd.evaluate.
+Per dataset: leave-one-clip-out accuracy of every method (:func:`jcrowd.model.evaluate.
 leave_one_clip_out`, Table 1's rows), error banded by reliability ρ and its Pearson r with ρ
 (§5.2), greedy sample reduction (§5.2), and Table 1's runtime and preprocessing columns
 (:func:`repro_001_runtime.runtime_per_frame`).
@@ -25,21 +25,26 @@ from repro_001_runtime import (
 )
 from repro_common import CONTROLS, save_figure
 
-from jcrowd.evaluate import ALL_METHODS, METHODS, leave_one_clip_out
 from jcrowd.kriging.reduction import greedy_reduction
 from jcrowd.kriging.universal import fit_kriging, predict, reliability
-from jcrowd.model import clamp_controls, sample_cores
-from jcrowd.samples import CONTROL_NAMES
-from jcrowd.tensor_model import root_frame_positions
+from jcrowd.model import (
+    ALL_CV_METHODS,
+    CONTROL_NAMES,
+    CV_METHODS,
+    clamp_controls,
+    leave_one_clip_out,
+    root_frame_positions,
+    sample_cores,
+)
 
 
 def reliability_errors(tensor: Any) -> dict[str, np.ndarray]:
     """Per left-out sample: ρ of its controls under the fold's kriging, and its joint error (m).
 
-    The kriging leg of :func:`jcrowd.evaluate.leave_one_clip_out` (same folds, same shared
+    The kriging leg of :func:`jcrowd.model.evaluate.leave_one_clip_out` (same folds, same shared
     variogram, level 0, the query clamped to the fold's control range), kept per sample so
     errors can be banded by reliability. ρ is taken at the requested (unclamped) controls, as
-    :mod:`jcrowd.model` reports it, so a query outside the samples shows a low ρ.
+    :mod:`jcrowd.model.motion_model` reports it, so a query outside the samples shows a low ρ.
     ``error_unclamped_m`` is the same prediction at the unclamped query, where the hyperplane
     trend extrapolates (to show what clamping changes).
 
@@ -107,7 +112,7 @@ def section_001(
     out: dict[str, Any] = {}
     for name, tensor in tensors.items():
         t = time.perf_counter()
-        cv = leave_one_clip_out(tensor, methods=METHODS if quick else ALL_METHODS)
+        cv = leave_one_clip_out(tensor, methods=CV_METHODS if quick else ALL_CV_METHODS)
         loco_s = time.perf_counter() - t
         per = reliability_errors(tensor)
         rho, err = per["rho"], per["error_m"]
@@ -224,7 +229,7 @@ def _clamping_note(d: dict[str, Any]) -> str:
     text = (
         "Every method is asked at the held-out controls clamped, control by control, to the "
         "training samples' range — what the model and the crowd do "
-        "(`jcrowd.model.clamp_controls`)."
+        "(`jcrowd.model.motion_model.clamp_controls`)."
     )
     if not d["outside_takes"]:
         return text + " No held-out take lies mostly outside the other takes' range here."
@@ -270,10 +275,10 @@ def _differs_001(r: dict[str, Any]) -> str:
         "positional RMSE in its own units, ours on walking cycles in cm, so only the ranking of "
         "methods compares. Our per-element kriging fits one variogram per pose element over its "
         "whole trajectory, the paper one per element and frame (reading in "
-        "`jcrowd/evaluate.py`). Leaving a whole clip out (every cycle of a take and its mirror) "
-        "leaves a hole in the control space, so held-out ρ stays below the paper's 0.9 band "
-        "and the high bands are empty or thin (data and protocol, not method). Even leaving out "
-        "one sample at a time, the most redundant sample's ρ (the first removal above) stays "
+        "`jcrowd/model/evaluate.py`). Leaving a whole clip out (every cycle of a take and its "
+        "mirror) leaves a hole in the control space, so held-out ρ stays below the paper's 0.9 "
+        "band and the high bands are empty or thin (data and protocol, not method). Even leaving "
+        "out one sample at a time, the most redundant sample's ρ (the first removal above) stays "
         "under τ = 0.85 on our sparse (dx, dz, dyaw) controls and fitted variogram, so greedy "
         "reduction at the paper's τ removes little or nothing; the plot shows the whole curve "
         "(data).\n\n" + runtime_note(r)

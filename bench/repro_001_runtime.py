@@ -22,8 +22,7 @@ from jcrowd.kriging.universal import (
     normalise_controls,
     predict_from_weights,
 )
-from jcrowd.model import sample_cores
-from jcrowd.samples import CONTROL_NAMES
+from jcrowd.model import CONTROL_NAMES, sample_cores
 from jcrowd.tensor import hooi
 
 _PAPER_RUNTIME = {"per_pose": 0.78, "per_element": 8.39, "rbf": 0.28}

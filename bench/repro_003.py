@@ -16,8 +16,8 @@ from common import data_root
 from repro_000 import decode_times
 
 from jcrowd import load_default_model
+from jcrowd.crowd import build_decoders
 from jcrowd.model import MotionLevel
-from jcrowd.synthesis import build_decoders
 
 
 def joint_only_speedup(agents: int, repeats: int) -> dict[str, Any]:
@@ -26,11 +26,12 @@ def joint_only_speedup(agents: int, repeats: int) -> dict[str, Any]:
     003 §6.4 measures the crowd speed-up from eliminating joints; jcrowd's key levels lower
     tensor ranks and joints together (000 §4.3), so here every level of the shipped model is
     rebuilt with level 0's bases and kriging (ranks ``R_P × R_T`` of level 0) and only its own
-    joint set, the rows of its dropped joints zeroed as :class:`~jcrowd.model.MotionLevel`
-    requires. :func:`repro_000.decode_times` then times, per level, decode
-    ``g = K(c) w_T(τ)`` (the same cost at every level: same ranks), the pose rows ``U_P g`` of
-    the kept joints and FK of the kept joints placing all output points (the whole body is
-    still drawn); and the last two alone (``fk_s``). Speed-up = full-skeleton time / level time.
+    joint set, the rows of its dropped joints zeroed as
+    :class:`~jcrowd.model.motion_model.MotionLevel` requires. :func:`repro_000.decode_times` then
+    times, per level, decode ``g = K(c) w_T(τ)`` (the same cost at every level: same ranks), the
+    pose rows ``U_P g`` of the kept joints and FK of the kept joints placing all output points (the
+    whole body is still drawn); and the last two alone (``fk_s``). Speed-up = full-skeleton time /
+    level time.
     """
     model = load_default_model()
     first = model.levels[0]

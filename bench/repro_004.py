@@ -28,11 +28,10 @@ import numpy as np
 from common import data_root
 from repro_common import save_figure
 
-from jcrowd.data import load_dataset
-from jcrowd.natural import natural_mode_tensor
-from jcrowd.rotation import quat_angle, quat_from_expmap, quat_mul, quat_normalize
-from jcrowd.tensor import hosvd, reconstruct
-from jcrowd.tensor_model import TensorModelConfig, build_tensor_model
+from jcrowd.io import load_dataset
+from jcrowd.model import TensorModelConfig, build_tensor_model
+from jcrowd.motion import quat_angle, quat_from_expmap, quat_mul, quat_normalize
+from jcrowd.tensor import hosvd, natural_mode_tensor, reconstruct
 
 ACTORS = ("07", "08")
 STYLES = {"walk": "walk", "slow walk": "slow walk", "slow walk/stride": "slow walk"}
@@ -119,7 +118,7 @@ def natural_mode_truncation() -> dict[str, Any]:
     every cell gives k cycles, k the smallest cell's count, taken evenly spaced over the cell's
     cycles in take order (so several takes contribute). The cycles are DTW-aligned to their
     medoid and resampled to 60 frames by the tensor-model pipeline
-    (:func:`jcrowd.tensor_model.build_tensor_model`, 004 §3's multiscale DTW; its key levels
+    (:func:`jcrowd.model.tensor_model.build_tensor_model`, 004 §3's multiscale DTW; its key levels
     are unused), then written as quaternions (:func:`_quaternion_samples`).
 
     Two tensors, as in the paper: Data Mode ``(f·n) × A × S × R`` and Frame × DOF

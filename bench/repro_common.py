@@ -22,7 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "REPRODUCTION.md"
 FIGS = ROOT / "docs" / "reproduction"
 CONTROLS = ("dx", "dz", "dyaw")
-"""The kriged controls, as in the shipped model (``jcrowd.model.fit_motion_model``'s default)."""
+"""The kriged controls, as in the shipped model (``jcrowd.model.motion_model.fit_motion_model``'s
+default)."""
 
 
 def compile_and_median_s(fn: Callable[[], Any], repeats: int) -> tuple[float, float]:

@@ -38,8 +38,8 @@ from repro_003 import markdown_003, section_003
 from repro_004 import markdown_004, plot_004, section_004
 from repro_common import DOC
 
-from jcrowd.data import load_dataset
-from jcrowd.tensor_model import build_tensor_model
+from jcrowd.io import load_dataset
+from jcrowd.model import build_tensor_model
 
 
 def _markdown(r: dict[str, Any], figs: list[str]) -> str:

@@ -30,12 +30,11 @@ from scipy.optimize import minimize
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import append_result, data_root, machine
 
-from jcrowd.io.bvh import read_bvh
-from jcrowd.motion import drop_tpose_frames
+from jcrowd.io import read_bvh
+from jcrowd.motion import drop_tpose_frames, forward_kinematics
 from jcrowd.simplify import analyse_motion, elimination_order, joint_counts, key_posture
 from jcrowd.simplify.levels import Weights, plan_level, position_problem
 from jcrowd.simplify.pipeline import simplify_motion
-from jcrowd.skeleton import forward_kinematics
 
 
 def _objective(x, x0, problem, w: Weights):

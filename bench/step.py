@@ -51,14 +51,19 @@ from common import machine, report
 
 from jcrowd import load_default_model
 from jcrowd.cli.run import use_cpu_devices
-from jcrowd.crowd import bucket_chunk, decode_bucket
-from jcrowd.model import MotionModel
-from jcrowd.posevec import PoseLayout
-from jcrowd.rotation import quat_from_expmap, quat_mul, yaw_quat
+from jcrowd.crowd import (
+    agent_mesh,
+    bucket_chunk,
+    decode_bucket,
+    decode_coeffs,
+    level_points,
+    pose_from_coeffs,
+    prepare,
+    shard_state,
+)
+from jcrowd.model import MotionModel, PoseLayout
+from jcrowd.motion import forward_kinematics, quat_from_expmap, quat_mul, yaw_quat
 from jcrowd.scenario import parse_scenario
-from jcrowd.simulate import agent_mesh, prepare, shard_state
-from jcrowd.skeleton import forward_kinematics
-from jcrowd.synthesis import decode_coeffs, level_points, pose_from_coeffs
 
 PLAZA = """
 model = "default"
@@ -151,8 +156,8 @@ def naive_ms(model: MotionModel, n: int, repeats: int) -> float:
 
 def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
     """Agent-frames/s of level-0 decode + FK for ``n`` agents (every agent at full detail),
-    decoded as the step decodes a bucket: in chunks (:func:`jcrowd.crowd.decode_bucket`; one
-    vmap over 100k agents materializes 480 MB of cores and runs memory-bound), each device its
+    decoded as the step decodes a bucket: in chunks (:func:`jcrowd.crowd.stepping.decode_bucket`;
+    one vmap over 100k agents materializes 480 MB of cores and runs memory-bound), each device its
     own share of the agents as in the split step."""
     from jax import shard_map
     from jax.sharding import NamedSharding

@@ -36,13 +36,9 @@ import dtw as dtw_bench  # bench/dtw.py: the DTW sequences and timing
 from common import append_result, data_root, machine
 
 from jcrowd.align import align_to_reference
-from jcrowd.data import load_dataset
-from jcrowd.motion import resample
-from jcrowd.posevec import PoseLayout, encode_sample, mean_rotations
-from jcrowd.samples import gait_samples, reference_skeleton
-from jcrowd.simplify import elimination_order, joint_importance
-from jcrowd.tensor import hooi, reconstruct, relative_error
-from jcrowd.tensor_model import (
+from jcrowd.io import load_dataset
+from jcrowd.model import PoseLayout, encode_sample, gait_samples, mean_rotations, reference_skeleton
+from jcrowd.model.tensor_model import (
     TensorModelConfig,
     _features,
     _medoid,
@@ -50,6 +46,9 @@ from jcrowd.tensor_model import (
     level_errors,
     storage,
 )
+from jcrowd.motion import resample
+from jcrowd.simplify import elimination_order, joint_importance
+from jcrowd.tensor import hooi, reconstruct, relative_error
 
 
 def _stages(folder: Path) -> dict[str, float]:

@@ -18,16 +18,16 @@ try:
 except PackageNotFoundError:  # running from a source tree that was not installed
     __version__ = "0.0.0+unknown"
 
-from jcrowd.data import Clip as Clip
-from jcrowd.data import load_dataset as load_dataset
-from jcrowd.gait import GaitCycle as GaitCycle
-from jcrowd.gait import foot_contacts as foot_contacts
-from jcrowd.gait import gait_cycles as gait_cycles
 from jcrowd.io.bvh import load_bvh as load_bvh
 from jcrowd.io.bvh import read_bvh as read_bvh
 from jcrowd.io.bvh_write import write_bvh as write_bvh
-from jcrowd.motion import Motion as Motion
-from jcrowd.resources import load_default_model as load_default_model
-from jcrowd.skeleton import Skeleton as Skeleton
-from jcrowd.skeleton import forward_kinematics as forward_kinematics
-from jcrowd.walker import procedural_walk as procedural_walk
+from jcrowd.io.dataset import load_dataset as load_dataset
+from jcrowd.io.resources import load_default_model as load_default_model
+from jcrowd.motion.clip import Clip as Clip
+from jcrowd.motion.clip import Motion as Motion
+from jcrowd.motion.gait import GaitCycle as GaitCycle
+from jcrowd.motion.gait import foot_contacts as foot_contacts
+from jcrowd.motion.gait import gait_cycles as gait_cycles
+from jcrowd.motion.skeleton import Skeleton as Skeleton
+from jcrowd.motion.skeleton import forward_kinematics as forward_kinematics
+from jcrowd.motion.walker import procedural_walk as procedural_walk

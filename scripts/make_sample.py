@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from jcrowd.io.bvh import write_bvh
-from jcrowd.walker import procedural_walk
+from jcrowd.io import write_bvh
+from jcrowd.motion import procedural_walk
 
 TARGET = Path(__file__).resolve().parents[1] / "jcrowd" / "assets" / "sample_walk.bvh"
 

@@ -22,7 +22,7 @@ from jcrowd.align import (
     pose_features,
 )
 from jcrowd.align.multiscale import project_path
-from jcrowd.io.bvh import read_bvh
+from jcrowd.io import read_bvh
 from jcrowd.motion import Motion, drop_tpose_frames
 
 

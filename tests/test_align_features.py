@@ -18,10 +18,18 @@ from jcrowd.align import (
 )
 from jcrowd.align.features import GRAVITY, to_heading_frame
 from jcrowd.errors import MotionError
-from jcrowd.io.bvh import read_bvh
-from jcrowd.motion import Motion, drop_tpose_frames, headings, joint_positions
-from jcrowd.rotation import quat_mul, quat_rotate, yaw_quat
-from jcrowd.skeleton import Skeleton, rest_positions
+from jcrowd.io import read_bvh
+from jcrowd.motion import (
+    Motion,
+    Skeleton,
+    drop_tpose_frames,
+    headings,
+    joint_positions,
+    quat_mul,
+    quat_rotate,
+    rest_positions,
+    yaw_quat,
+)
 
 
 @cache

@@ -22,7 +22,7 @@ from jcrowd.align import (
     warp_from_increments,
     warp_increments,
 )
-from jcrowd.io.bvh import read_bvh
+from jcrowd.io import read_bvh
 from jcrowd.motion import Motion, drop_tpose_frames
 
 

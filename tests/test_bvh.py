@@ -23,10 +23,8 @@ from bvh import Bvh
 from scipy.spatial.transform import Rotation
 
 from jcrowd.errors import BVHError, JcrowdError
-from jcrowd.io.bvh import UNIT_SCALES, BVHClip, load_bvh, read_bvh, write_bvh
-from jcrowd.motion import Motion
-from jcrowd.rotation import EULER_ORDERS, quat_angle, quat_to_euler
-from jcrowd.skeleton import Skeleton
+from jcrowd.io import UNIT_SCALES, BVHClip, load_bvh, read_bvh, write_bvh
+from jcrowd.motion import EULER_ORDERS, Motion, Skeleton, quat_angle, quat_to_euler
 
 LENGTH_TOL = 1e-6  # metres; see the module docstring
 ANGLE_TOL = 1e-4  # degrees; see the module docstring

@@ -119,7 +119,7 @@ def test_simplify_writes_levels_that_load_elsewhere(
 ) -> None:
     from bvh import Bvh
 
-    from jcrowd.io.bvh import read_bvh
+    from jcrowd.io import read_bvh
 
     out = tmp_path / "levels"
     code, report = _json(
@@ -163,7 +163,7 @@ def test_simplify_rejects_too_many_levels(
 def test_fit_writes_a_model_and_a_report(
     cmu16_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from jcrowd.io.model_file import load_motion_model
+    from jcrowd.io import load_motion_model
 
     out, report = tmp_path / "m.jcm", tmp_path / "report"
     argv = ["fit", str(cmu16_dir), "--levels", "3", "--out", str(out), "--report", str(report)]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from jcrowd.cli import main
-from jcrowd.io.bvh import read_bvh
+from jcrowd.io import read_bvh
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 from jcrowd import load_default_model
-from jcrowd.clips import build_crowd_model, next_clip, next_clips, next_clips_lod
+from jcrowd.crowd import build_crowd_model, clip_weights, next_clip, next_clips, next_clips_lod
 from jcrowd.kriging.universal import kriging_weights, reliability_one, weights_and_reliability
-from jcrowd.synthesis import clip_weights
 
 
 @pytest.fixture(scope="module")

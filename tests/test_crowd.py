@@ -16,10 +16,8 @@ import numpy as np
 import pytest
 
 from jcrowd import load_default_model
-from jcrowd.crowd import step
+from jcrowd.crowd import decode_coeffs, level_points, pose_from_coeffs, prepare, step
 from jcrowd.scenario import parse_scenario
-from jcrowd.simulate import prepare
-from jcrowd.synthesis import decode_coeffs, level_points, pose_from_coeffs
 
 SCENE = """
 model = "default"
@@ -221,7 +219,7 @@ SHARDED = textwrap.dedent(
     from jcrowd import load_default_model
     from jcrowd.errors import JcrowdError
     from jcrowd.scenario import parse_scenario
-    from jcrowd.simulate import in_agent_order, prepare, shard_state
+    from jcrowd.crowd import in_agent_order, prepare, shard_state
     text = sys.stdin.read()
     sim, state = prepare(parse_scenario(text, "t.toml"), load_default_model())
     fn = sim.compiled()
@@ -418,7 +416,7 @@ def test_first_state_spreads_phases_and_no_choice_waits(model):
 def test_step_compiles_without_state_copies_and_same_results(model):
     """With copy insertion's region analysis (CPU), the compiled step copies no donated state
     buffer, and the crowd is bit-for-bit the one compiled without the option."""
-    from jcrowd.simulate import step_compiler_options
+    from jcrowd.crowd import step_compiler_options
 
     if not step_compiler_options():
         pytest.skip("this XLA has no xla_cpu_copy_insertion_use_region_analysis option")
@@ -466,7 +464,7 @@ def test_coarsest_level_cached_cores_match_direct_decode_across_clip_changes(mod
 def test_waypoint_pick_by_selects_or_gather_equals_indexing(model, k, monkeypatch):
     """Both ways of reading each agent's current waypoint (selects up to SELECT_WAYPOINTS,
     a gather beyond) equal NumPy fancy indexing, exactly (no arithmetic)."""
-    import jcrowd.crowd as crowd
+    import jcrowd.crowd.stepping as crowd
 
     _, state = _sim(model, count=10)
     rng = np.random.default_rng(k)

@@ -10,18 +10,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jcrowd.data import Clip, load_dataset, procedural_walk, walker_skeleton
 from jcrowd.errors import BVHError, DataError, MotionError
-from jcrowd.gait import foot_contacts, gait_cycles
-from jcrowd.io.bvh import write_bvh
-from jcrowd.motion import headings, left_right_pairs, rest_forward
-from jcrowd.skeleton import (
+from jcrowd.io import load_dataset, write_bvh
+from jcrowd.motion import (
     bone_lengths,
     end_site_positions,
+    foot_contacts,
     forward_kinematics,
+    gait_cycles,
     joint_bone_lengths,
+    procedural_walk,
     rest_positions,
+    walker_skeleton,
 )
+from jcrowd.motion.clip import Clip, headings, left_right_pairs, rest_forward
 
 DEG = np.pi / 180
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 import jcrowd
+from jcrowd.io import default_model_path
 from jcrowd.model import synthesize_clip
-from jcrowd.resources import default_model_path
 
 
 def test_default_model_loads_and_turns() -> None:

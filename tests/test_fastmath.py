@@ -1,4 +1,4 @@
-"""Tests for jcrowd.fastmath.sincos: NumPy float64 as the oracle, properties, jit/vmap/grad.
+"""Tests for jcrowd.motion.fastmath.sincos: NumPy float64 as the oracle, properties, jit/vmap/grad.
 
 Tolerances (and why):
 
@@ -17,7 +17,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jcrowd.fastmath import sincos
+from jcrowd.motion import sincos
 
 ABS = 2.5e-7
 

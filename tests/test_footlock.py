@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from jcrowd.evaluate import foot_skate
-from jcrowd.footlock import lock_feet
-from jcrowd.motion import Motion, joint_positions
-from jcrowd.walker import procedural_walk
+from jcrowd.model import foot_skate
+from jcrowd.motion import Motion, joint_positions, lock_feet, procedural_walk
 
 
 def test_a_sliding_walk_is_locked_and_a_planted_one_left_alone() -> None:

@@ -10,7 +10,19 @@ import numpy as np
 import pytest
 
 from jcrowd.errors import MotionError
-from jcrowd.gait import (
+from jcrowd.io import read_bvh
+from jcrowd.motion import (
+    Motion,
+    Skeleton,
+    drop_tpose_frames,
+    mirror,
+    normalize_root,
+    quat_mul,
+    quat_rotate,
+    resample,
+    yaw_quat,
+)
+from jcrowd.motion.gait import (
     ContactThresholds,
     _hysteresis,
     character_height,
@@ -18,10 +30,6 @@ from jcrowd.gait import (
     foot_contacts,
     gait_cycles,
 )
-from jcrowd.io.bvh import read_bvh
-from jcrowd.motion import Motion, drop_tpose_frames, mirror, normalize_root, resample
-from jcrowd.rotation import quat_mul, quat_rotate, yaw_quat
-from jcrowd.skeleton import Skeleton
 
 
 @cache

@@ -1,5 +1,5 @@
-"""Tests for jcrowd.keylevels: rank path, greedy key levels (paper 000 §4.2), in-between levels,
-joint reduction (§4.3) and storage accounting (§5.1)."""
+"""Tests for jcrowd.tensor.keylevels: rank path, greedy key levels (paper 000 §4.2), in-between
+levels, joint reduction (§4.3) and storage accounting (§5.1)."""
 
 from __future__ import annotations
 
@@ -10,18 +10,22 @@ import pytest
 from test_tensor import smooth_tensor
 
 from jcrowd.errors import TensorError
-from jcrowd.keylevels import (
+from jcrowd.tensor import (
+    RESULT,
     KeyLevels,
     accuracy_levels,
     accuracy_tucker,
     drop_pose_elements,
+    hooi,
     key_levels,
+    mean_squared_error,
     pca_rank_for_error,
     rank_path,
+    reconstruct,
     storage_report,
+    truncate,
     tucker_nbytes,
 )
-from jcrowd.tensor import RESULT, hooi, mean_squared_error, reconstruct, truncate
 
 N = 6
 MAX, MIN = (20, 25, 30), (4, 5, 6)

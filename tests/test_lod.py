@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jcrowd.lod import (
+from jcrowd.crowd import (
     CameraView,
     assign_buckets,
     distance_levels,
@@ -79,8 +79,8 @@ def test_budget_equals_greedy_loop(seed):
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_unconstrained_branch_equals_greedy_fill_when_everything_fits(seed):
     """The fast branch (no level overflows) gives the greedy fill's buckets slot for slot."""
-    from jcrowd.lod import _greedy as greedy_fill
-    from jcrowd.lod import _unconstrained
+    from jcrowd.crowd.lod import _greedy as greedy_fill
+    from jcrowd.crowd.lod import _unconstrained
 
     rng = np.random.default_rng(seed)
     n = 400

@@ -7,19 +7,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jcrowd.data import load_dataset
 from jcrowd.errors import KrigingError
-from jcrowd.evaluate import evaluate_captures, foot_skate
+from jcrowd.io import load_dataset
 from jcrowd.kriging import predict
 from jcrowd.model import (
     MotionModel,
+    TensorModel,
+    build_tensor_model,
     clamp_controls,
+    evaluate_captures,
     fit_motion_model,
+    foot_skate,
     level_cores,
     level_pose_vectors,
+    reconstruct_level,
     synthesize_clip,
 )
-from jcrowd.tensor_model import TensorModel, build_tensor_model, reconstruct_level
 
 
 @pytest.fixture(scope="module")
@@ -130,10 +133,8 @@ def test_foot_lock_in_synthesize_and_eval(
 
 def test_kriging_beats_rbf_and_nearest_on_the_walker() -> None:
     """Ground truth from the procedural walker: a 4×5 grid of speeds and turns, 2 cycles each."""
-    from jcrowd.data import Clip
-    from jcrowd.evaluate import leave_one_clip_out
-    from jcrowd.tensor_model import TensorModelConfig
-    from jcrowd.walker import procedural_walk
+    from jcrowd.model import TensorModelConfig, leave_one_clip_out
+    from jcrowd.motion import Clip, procedural_walk
 
     grid = [(v, y) for v in (1.0, 1.25, 1.5, 1.75) for y in (-0.6, -0.3, 0.0, 0.3, 0.6)]
     clips = []

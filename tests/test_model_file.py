@@ -7,11 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jcrowd.data import load_dataset
 from jcrowd.errors import StoreError
-from jcrowd.io.model_file import load_motion_model, save_motion_model
-from jcrowd.model import fit_motion_model, level_pose_vectors
-from jcrowd.tensor_model import TensorModelConfig, build_tensor_model, save_tensor_model
+from jcrowd.io import load_dataset, load_motion_model, save_motion_model, save_tensor_model
+from jcrowd.model import TensorModelConfig, build_tensor_model, fit_motion_model, level_pose_vectors
 
 
 def test_round_trip(cmu16_dir: Path, tmp_path: Path) -> None:

@@ -1,4 +1,4 @@
-"""Tests for jcrowd.motion: the Motion model and the clip operations, on synthetic clips.
+"""Tests for jcrowd.motion.clip: the Motion model and the clip operations, on synthetic clips.
 
 Clips here are built from closed forms (joint angles that are sines of time, a root moving at
 constant velocity), so each operation's answer is known without the library: resampling a
@@ -18,7 +18,9 @@ from scipy.spatial.transform import Rotation
 from jcrowd.errors import MotionError
 from jcrowd.motion import (
     Motion,
+    Skeleton,
     drop_tpose_frames,
+    forward_kinematics,
     headings,
     joint_positions,
     mirror,
@@ -28,7 +30,6 @@ from jcrowd.motion import (
     rest_forward,
     slice_frames,
 )
-from jcrowd.skeleton import Skeleton, forward_kinematics
 
 TOL64 = 1e-12  # NumPy float64 paths: rounding only
 

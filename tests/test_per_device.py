@@ -1,9 +1,9 @@
-"""The step split over several devices (``jcrowd.simulate._per_device_step``).
+"""The step split over several devices (``jcrowd.crowd.simulate._per_device_step``).
 
 Oracle: the split step on ``K`` devices equals the one-device step run on each device's block
-of agents (agents ``k, k + K, …``: :func:`~jcrowd.simulate.agent_order`) separately with
-:func:`~jcrowd.simulate.per_device_config`'s share of the budget, the blocks' frames joined with
-agent ids and the counters summed — including when the budget binds. When it does not bind, it
+of agents (agents ``k, k + K, …``: :func:`~jcrowd.crowd.simulate.agent_order`) separately with
+:func:`~jcrowd.crowd.simulate.per_device_config`'s share of the budget, the blocks' frames joined
+with agent ids and the counters summed — including when the budget binds. When it does not bind, it
 also equals the one-device step on the whole crowd.
 
 Tolerance 1e-5 (m, and aligned frames for τ): the same float32 program per agent; XLA may
@@ -25,8 +25,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from jcrowd.crowd import StepConfig
-from jcrowd.simulate import agent_order, in_agent_order, per_device_config
+from jcrowd.crowd import StepConfig, agent_order, in_agent_order, per_device_config
 
 SCENE = """
 model = "default"
@@ -55,7 +54,7 @@ SCRIPT = textwrap.dedent(
     import jax, jax.numpy as jnp, numpy as np
     from jcrowd import load_default_model
     from jcrowd.scenario import parse_scenario
-    from jcrowd.simulate import in_agent_order, per_device_config, prepare, shard_state
+    from jcrowd.crowd import in_agent_order, per_device_config, prepare, shard_state
     mode, caps, text = sys.argv[1], json.loads(sys.argv[2]), sys.stdin.read()
     sim, state = prepare(parse_scenario(text, "t.toml"), load_default_model())
     if caps:

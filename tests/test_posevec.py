@@ -8,16 +8,23 @@ import numpy as np
 import pytest
 
 from jcrowd.errors import MotionError
-from jcrowd.gait import character_height, gait_cycles
-from jcrowd.io.bvh import read_bvh
-from jcrowd.motion import Motion, drop_tpose_frames, joint_positions, normalize_root, slice_frames
-from jcrowd.posevec import (
+from jcrowd.io import read_bvh
+from jcrowd.model import (
     PoseLayout,
     decode_pose_vectors,
     encode_sample,
     mean_rotations,
     sample_at,
     unwarp,
+)
+from jcrowd.motion import (
+    Motion,
+    character_height,
+    drop_tpose_frames,
+    gait_cycles,
+    joint_positions,
+    normalize_root,
+    slice_frames,
 )
 
 
@@ -64,8 +71,7 @@ def test_encode_decode_is_exact_on_aligned_frames(
 
 
 def _fwd(m: Motion) -> tuple[np.ndarray, np.ndarray]:
-    from jcrowd.motion import rest_forward
-    from jcrowd.rotation import quat_rotate
+    from jcrowd.motion import quat_rotate, rest_forward
 
     f = quat_rotate(np.asarray(m.rotations[:, 0], np.float64), rest_forward(m.skeleton)[None])
     return f[:, 0], f[:, 2]

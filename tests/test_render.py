@@ -22,6 +22,7 @@ import pytest
 from test_render_golden import LEVEL1_KEEP, place, reduce_skeleton, tpose, walk_poses
 
 from jcrowd.errors import RenderError
+from jcrowd.motion import walker_skeleton
 from jcrowd.render import (
     GROUP_COLORS,
     LEVEL_COLORS,
@@ -39,7 +40,6 @@ from jcrowd.render import (
     write_png,
 )
 from jcrowd.render.meshes import capsule_mesh
-from jcrowd.walker import walker_skeleton
 
 PARENTS = walker_skeleton().parents
 W, H = 160, 120

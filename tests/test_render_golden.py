@@ -24,6 +24,7 @@ import moderngl
 import numpy as np
 import pytest
 
+from jcrowd.motion import forward_kinematics, procedural_walk, rest_positions, walker_skeleton
 from jcrowd.render import (
     LEVEL_COLORS,
     CrowdRenderer,
@@ -32,8 +33,6 @@ from jcrowd.render import (
     make_context,
     write_png,
 )
-from jcrowd.skeleton import forward_kinematics, rest_positions
-from jcrowd.walker import procedural_walk, walker_skeleton
 
 GOLDEN = Path(__file__).resolve().parent / "golden"
 WIDTH, HEIGHT = 160, 120

@@ -1,4 +1,4 @@
-"""Tests for jcrowd.rotation: SciPy as the oracle, properties with hypothesis, jit/vmap.
+"""Tests for jcrowd.motion.rotation: SciPy as the oracle, properties with hypothesis, jit/vmap.
 
 Tolerances used below (and why):
 
@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation, Slerp
 
 from jcrowd.errors import JcrowdError
-from jcrowd.rotation import (
+from jcrowd.motion import (
     EULER_ORDERS,
     euler_to_quat,
     quat_angle,

@@ -7,11 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jcrowd.data import load_dataset
 from jcrowd.errors import DataError
-from jcrowd.gait import character_height
-from jcrowd.motion import headings
-from jcrowd.samples import CONTROL_NAMES, gait_samples, reference_skeleton
+from jcrowd.io import load_dataset
+from jcrowd.model import CONTROL_NAMES, gait_samples, reference_skeleton
+from jcrowd.motion import character_height, headings
 
 
 @pytest.fixture(scope="module")

@@ -1,5 +1,5 @@
-"""Tests for jcrowd.scenario and jcrowd.scenario_spawn: the shipped examples, region geometry
-(uniform sampling, point-in-polygon against a slow loop), camera interpolation, spawn
+"""Tests for jcrowd.scenario.schema and jcrowd.scenario.spawning: the shipped examples, region
+geometry (uniform sampling, point-in-polygon against a slow loop), camera interpolation, spawn
 determinism and paths, and every kind of bad scenario file (message names file and key path)."""
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import pytest
 from jcrowd.errors import JcrowdError, ScenarioError
 from jcrowd.scenario import (
     DEFAULT_THRESHOLDS_M,
+    LATERAL_JITTER_M,
     Camera,
     CameraKey,
     Group,
@@ -24,9 +25,10 @@ from jcrowd.scenario import (
     camera_at,
     load_scenario,
     parse_scenario,
+    polygon_contains,
     spawn,
+    triangulate,
 )
-from jcrowd.scenario_spawn import LATERAL_JITTER_M, polygon_contains, triangulate
 
 EXAMPLES = FilePath(__file__).resolve().parents[1] / "examples"
 EXPECTED_COUNTS = {  # what each example promises (examples/README.md)

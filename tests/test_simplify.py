@@ -32,8 +32,17 @@ from bvh import Bvh
 from scipy.spatial.transform import Rotation
 
 from jcrowd.errors import JcrowdError
-from jcrowd.io.bvh import read_bvh, write_bvh
-from jcrowd.motion import Motion, drop_tpose_frames, joint_positions, slice_frames
+from jcrowd.io import read_bvh, write_bvh
+from jcrowd.motion import (
+    Motion,
+    Skeleton,
+    drop_tpose_frames,
+    joint_bone_lengths,
+    joint_positions,
+    procedural_walk,
+    slice_frames,
+    walker_skeleton,
+)
 from jcrowd.simplify import (
     RESULT,
     Weights,
@@ -47,8 +56,6 @@ from jcrowd.simplify.analysis import elimination_order, key_posture
 from jcrowd.simplify.levels import plan_level, position_problem
 from jcrowd.simplify.pipeline import solve_positions
 from jcrowd.simplify.sqp import sqp_solve
-from jcrowd.skeleton import Skeleton, joint_bone_lengths
-from jcrowd.walker import procedural_walk, walker_skeleton
 
 # ------------------------------------------------------------------------------- small clip
 

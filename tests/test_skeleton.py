@@ -1,4 +1,5 @@
-"""Tests for jcrowd.skeleton: forward kinematics against a slow per-joint loop, and Skeleton checks.
+"""Tests for jcrowd.motion.skeleton: forward kinematics against a slow per-joint loop, and Skeleton
+checks.
 
 The oracle builds 3×3 matrices with SciPy and walks the joints one by one in float64:
 ``G_j = G_parent L_j`` and ``p_j = p_parent + G_parent o_j``. The library instead works one tree
@@ -17,7 +18,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from jcrowd.errors import SkeletonError
-from jcrowd.skeleton import (
+from jcrowd.motion import (
     Skeleton,
     bone_lengths,
     end_site_positions,

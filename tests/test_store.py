@@ -11,14 +11,14 @@ import pytest
 from safetensors.numpy import save
 
 from jcrowd.errors import StoreError
-from jcrowd.io.store import (
+from jcrowd.io import (
     FORMAT_VERSION,
     load_store,
     save_store,
     skeleton_from_json,
     skeleton_to_json,
 )
-from jcrowd.walker import walker_skeleton
+from jcrowd.motion import walker_skeleton
 
 
 def _example() -> tuple[dict[str, np.ndarray], dict]:

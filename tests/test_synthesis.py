@@ -1,4 +1,5 @@
-"""Per-agent synthesis (jcrowd.synthesis) against the offline decode of jcrowd.model."""
+"""Per-agent synthesis (jcrowd.crowd.synthesis) against the offline decode of
+jcrowd.model.motion_model."""
 
 from __future__ import annotations
 
@@ -10,10 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jcrowd import load_default_model
-from jcrowd.model import level_pose_vectors
-from jcrowd.posevec import decode_pose_vectors
-from jcrowd.skeleton import end_site_positions, forward_kinematics
-from jcrowd.synthesis import (
+from jcrowd.crowd.synthesis import (
     _factor_cores,
     build_decoders,
     clip_core,
@@ -22,6 +20,8 @@ from jcrowd.synthesis import (
     level_points,
     pose_from_coeffs,
 )
+from jcrowd.model import decode_pose_vectors, level_pose_vectors
+from jcrowd.motion import end_site_positions, forward_kinematics
 
 
 @pytest.fixture(scope="module")

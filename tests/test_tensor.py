@@ -1,5 +1,5 @@
-"""Tests for jcrowd.tensor: unfold/fold, mode products, HOSVD, HOOI (TensorLy as the oracle),
-truncation, natural-mode tensors (paper 004 §2).
+"""Tests for jcrowd.tensor.algebra: unfold/fold, mode products, HOSVD, HOOI (TensorLy as the
+oracle), truncation, natural-mode tensors (paper 004 §2).
 
 Everything is float64 NumPy. Where a tolerance is not machine precision the reason is stated.
 """
@@ -14,7 +14,6 @@ import tensorly as tl
 from tensorly.decomposition import tucker as tl_tucker
 
 from jcrowd.errors import JcrowdError, TensorError
-from jcrowd.natural import natural_mode_tensor, synthesize
 from jcrowd.tensor import (
     RESULT,
     Tucker,
@@ -24,8 +23,10 @@ from jcrowd.tensor import (
     mean_squared_error,
     mode_product,
     multi_mode_product,
+    natural_mode_tensor,
     reconstruct,
     relative_error,
+    synthesize,
     truncate,
     unfold,
 )

@@ -8,15 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jcrowd.data import load_dataset
 from jcrowd.errors import StoreError
-from jcrowd.tensor_model import (
+from jcrowd.io import load_dataset, load_tensor_model, save_tensor_model
+from jcrowd.model import (
     TensorModel,
     build_tensor_model,
     level_errors,
-    load_tensor_model,
     reconstruct_level,
-    save_tensor_model,
     storage,
 )
 

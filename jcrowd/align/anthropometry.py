@@ -33,7 +33,8 @@ thigh (upleg, upperleg, thigh, femur, a bare ``hip``), shank (shin, tibia, lower
 leg), trunk (hips, hipjoint, pelvis, spine, back, chest, thorax, torso, abdomen, waist, root,
 clavicle, shoulder, collar), head (head, neck, skull, jaw). CMU's ``LHipJoint`` is the pelvis
 bone from the root to the hip, hence trunk; ``LeftShoulder``/``lclavicle`` is the shoulder
-girdle, which de Leva counts in the trunk. Sides come from :func:`jcrowd.motion.left_right_pairs`.
+girdle, which de Leva counts in the trunk. Sides come from
+:func:`jcrowd.motion.clip.left_right_pairs`.
 
 Within a limb category and side (trunk and head: the whole category, whatever side a bone is
 on) the table's mass is spread over its bones in proportion to their length; a segment made of
@@ -53,8 +54,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jcrowd.motion import left_right_pairs
-from jcrowd.skeleton import Skeleton, rest_positions
+from jcrowd.motion.clip import left_right_pairs
+from jcrowd.motion.skeleton import Skeleton, rest_positions
 
 __all__ = ["DE_LEVA_MALE", "BodySegments", "body_segments"]
 

@@ -27,9 +27,9 @@ from jaxtyping import Float
 
 from jcrowd.align.anthropometry import BodySegments, body_segments
 from jcrowd.errors import MotionError
-from jcrowd.gait import character_height
-from jcrowd.motion import Motion, headings
-from jcrowd.skeleton import end_site_positions, forward_kinematics
+from jcrowd.motion.clip import Motion, headings
+from jcrowd.motion.gait import character_height
+from jcrowd.motion.skeleton import end_site_positions, forward_kinematics
 
 __all__ = ["GRAVITY", "center_of_mass", "physics_features", "pose_features", "to_heading_frame"]
 
@@ -57,7 +57,7 @@ def to_heading_frame(
 ) -> Float[np.ndarray, "F *n 3"]:
     """Turn per-frame vectors by minus the frame's heading about +Y (so heading 0 faces +Z).
 
-    A yaw θ maps +Z to (sin θ, 0, cos θ) (:func:`jcrowd.rotation.quat_yaw`); its inverse maps
+    A yaw θ maps +Z to (sin θ, 0, cos θ) (:func:`jcrowd.motion.rotation.quat_yaw`); its inverse maps
     (x, y, z) to (x cos θ − z sin θ, y, x sin θ + z cos θ).
     """
     v = np.asarray(vectors, np.float64)
@@ -73,7 +73,7 @@ def pose_features(
     """Joint point cloud in the heading frame, ``(F, 3J)`` (m).
 
     Row ``t`` holds ``√w_j · R_y(−θ_t)(p_j(t) − p_root(t))`` for every joint ``j``, where ``θ_t``
-    is the root heading (:func:`jcrowd.motion.headings`). The squared Euclidean distance of two
+    is the root heading (:func:`jcrowd.motion.clip.headings`). The squared Euclidean distance of two
     rows is then the weighted point-cloud distance ``Σ_j w_j |Δp_j|²`` (paper 001 §3.4–3.5,
     after Kovar & Gleicher; see the module doc for the reading taken).
 

@@ -44,8 +44,8 @@ from jaxtyping import Float
 from jcrowd.align.costs import AlignError, Metric, as_sequence
 from jcrowd.align.dtw import DTWResult, dtw
 from jcrowd.align.multiscale import multiscale_dtw
-from jcrowd.motion import Motion
-from jcrowd.rotation import quat_slerp
+from jcrowd.motion.clip import Motion
+from jcrowd.motion.rotation import quat_slerp
 
 __all__ = [
     "Alignment",

@@ -33,8 +33,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from jcrowd.cli import emit
     from jcrowd.cli.render import parse_size, render_scenario
     from jcrowd.errors import JcrowdError
-    from jcrowd.resources import demo_scenario_path, load_default_model
-    from jcrowd.scenario import load_scenario
+    from jcrowd.io.resources import demo_scenario_path, load_default_model
+    from jcrowd.scenario.parse import load_scenario
 
     if not args.seconds > 0:
         raise JcrowdError(f"--seconds: expected a positive number, found {args.seconds}")

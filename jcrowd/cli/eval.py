@@ -40,10 +40,10 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from jcrowd.cli import emit
-    from jcrowd.data import load_dataset
     from jcrowd.errors import DataError
-    from jcrowd.evaluate import evaluate_captures
+    from jcrowd.io.dataset import load_dataset
     from jcrowd.io.model_file import load_motion_model
+    from jcrowd.model.evaluate import evaluate_captures
 
     model, _ = load_motion_model(args.model)
     cycles = evaluate_captures(

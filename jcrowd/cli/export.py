@@ -1,7 +1,7 @@
 """``jcrowd export RUN.npz --agent ID [ID ...] --out-dir DIR``: agents of a run as BVH files.
 
 The run must be recorded with ``jcrowd run --record all``. Each chosen agent is re-synthesized
-at full detail from its recorded clips and phases (:func:`jcrowd.export.agent_motion`) and
+at full detail from its recorded clips and phases (:func:`jcrowd.crowd.export.agent_motion`) and
 written as ``DIR/agent_ID.bvh`` (metres, the run's frame rate, every joint of the model's
 skeleton), which Blender and MotionBuilder import. ``--model`` overrides the model file the
 recording names. ``--json`` prints ``files`` and ``frames``.
@@ -32,8 +32,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     import numpy as np
 
     from jcrowd.cli import emit
+    from jcrowd.crowd.export import agent_motion
     from jcrowd.errors import JcrowdError
-    from jcrowd.export import agent_motion
     from jcrowd.io.bvh_write import write_bvh
     from jcrowd.io.model_file import load_motion_model
 

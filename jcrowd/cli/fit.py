@@ -40,12 +40,17 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from rich.progress import Progress
 
     from jcrowd.cli import emit
-    from jcrowd.data import load_dataset
-    from jcrowd.evaluate import leave_one_clip_out
+    from jcrowd.io.dataset import load_dataset
     from jcrowd.io.model_file import save_motion_model
-    from jcrowd.keylevels import tucker_nbytes
-    from jcrowd.model import fit_motion_model
-    from jcrowd.tensor_model import TensorModelConfig, build_tensor_model, level_errors, storage
+    from jcrowd.model.evaluate import leave_one_clip_out
+    from jcrowd.model.motion_model import fit_motion_model
+    from jcrowd.model.tensor_model import (
+        TensorModelConfig,
+        build_tensor_model,
+        level_errors,
+        storage,
+    )
+    from jcrowd.tensor.keylevels import tucker_nbytes
 
     controls = tuple(c.strip() for c in args.controls.split(",") if c.strip())
     start = time.perf_counter()

@@ -39,10 +39,10 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 def inspect_bvh(path: str | Path, scale: float | None = None) -> dict[str, Any]:
     """Everything ``jcrowd inspect`` reports about one BVH file, as plain JSON-ready data."""
-    from jcrowd.gait import character_height, foot_contacts, gait_cycles
     from jcrowd.io.bvh import load_bvh
-    from jcrowd.motion import drop_tpose_frames
-    from jcrowd.skeleton import bone_lengths
+    from jcrowd.motion.clip import drop_tpose_frames
+    from jcrowd.motion.gait import character_height, foot_contacts, gait_cycles
+    from jcrowd.motion.skeleton import bone_lengths
 
     clip = load_bvh(path, scale=scale)
     motion, dropped = drop_tpose_frames(clip.motion)
@@ -191,7 +191,7 @@ def _render(result: dict[str, Any]) -> None:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from jcrowd.cli import emit
-    from jcrowd.resources import sample_bvh_path
+    from jcrowd.io.resources import sample_bvh_path
 
     path = args.file
     if path is None:

@@ -77,7 +77,7 @@ class _Sink:
 
 def _view(scenario: Any, t: float) -> Any:
     from jcrowd.render import View
-    from jcrowd.scenario import camera_at
+    from jcrowd.scenario.schema import camera_at
 
     cam = scenario.camera
     eye, target = camera_at(cam, t)
@@ -118,9 +118,9 @@ def render_scenario(
     from rich.console import Console
     from rich.progress import Progress
 
+    from jcrowd.crowd.simulate import in_agent_order, prepare, shard_state
+    from jcrowd.crowd.synthesis import point_parents
     from jcrowd.render import CrowdRenderer, LevelInstances, write_png
-    from jcrowd.simulate import in_agent_order, prepare, shard_state
-    from jcrowd.synthesis import point_parents
 
     sim, state = prepare(scenario, model)
     state = shard_state(state)  # one block of agents per device (unchanged on one device)
@@ -135,7 +135,7 @@ def render_scenario(
     _, first = jax.block_until_ready(fn(warm, sim.view_at(0.0), sim.dt_array))
     compile_s = time.perf_counter() - t0
     # Slots per level as the step returns them (split over K devices a level holds K shares of
-    # its capacity, rounded up: jcrowd.simulate.per_device_config).
+    # its capacity, rounded up: jcrowd.crowd.simulate.per_device_config).
     caps = tuple(int(s.shape[0]) for s in first.slots)
     step_ms, draw_ms = [], []
     sink = _Sink(out, scenario.fps)
@@ -259,7 +259,7 @@ def render_recording(
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from jcrowd.cli import emit
     from jcrowd.cli.run import load_model
-    from jcrowd.scenario import load_scenario
+    from jcrowd.scenario.parse import load_scenario
 
     if Path(args.source).suffix.lower() == ".npz":
         size = parse_size(args.size, (1280, 720))

@@ -15,7 +15,7 @@ Recording (``--out run.npz``, written atomically):
   a next clip is chosen) so ``jcrowd export`` can re-synthesize any agent at full detail.
 
 ``--cpu-devices K`` splits the crowd over K CPU devices (one per core is fastest): each steps
-its own block of agents with 1/K of every LOD budget (:func:`jcrowd.simulate.Simulation.
+its own block of agents with 1/K of every LOD budget (:func:`jcrowd.crowd.simulate.Simulation.
 compiled`); the agent count must divide by K.
 
 Several processes (``--coordinator HOST:PORT --num-processes N --process-id I``, one command
@@ -85,7 +85,7 @@ def init_distributed(coordinator: str, processes: int, process_id: int) -> None:
 def load_model(scenario: Any, override: str | None) -> tuple[Any, str]:
     """The model a run uses: ``--model``, else the scenario's, else the shipped default."""
     from jcrowd.io.model_file import load_motion_model
-    from jcrowd.resources import default_model_path
+    from jcrowd.io.resources import default_model_path
 
     path = override or scenario.model or str(default_model_path())
     model, _ = load_motion_model(path)
@@ -96,7 +96,7 @@ def use_cpu_devices(count: int) -> None:
     """Ask XLA for ``count`` CPU devices (before JAX starts its backend; 1: leave as is).
 
     The crowd step runs one device's share of the agents per device
-    (:func:`jcrowd.simulate.Simulation.compiled`); on CPU, XLA runs one step's kernels nearly
+    (:func:`jcrowd.crowd.simulate.Simulation.compiled`); on CPU, XLA runs one step's kernels nearly
     one after the other, so a second device is what puts a second core to work (100k-agent
     plaza on 2 cores: ~12 ms on one device, 8.6–9.7 ms on two; bench/RESULTS.md).
     """
@@ -133,9 +133,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _run(args: argparse.Namespace) -> dict[str, Any]:
+    from jcrowd.crowd.simulate import prepare, shard_state
     from jcrowd.errors import JcrowdError
-    from jcrowd.scenario import load_scenario
-    from jcrowd.simulate import prepare, shard_state
+    from jcrowd.scenario.parse import load_scenario
 
     scenario = load_scenario(args.scenario)
     model, model_path = load_model(scenario, args.model)
@@ -153,7 +153,7 @@ def _run(args: argparse.Namespace) -> dict[str, Any]:
     result.update(scenario=str(args.scenario), model=model_path, record=args.record, out=None)
     result["devices"] = jax_device_count()
     if args.out:
-        from jcrowd.synthesis import point_parents
+        from jcrowd.crowd.synthesis import point_parents
 
         recording["model"] = np.asarray(model_path)
         recording["parents"] = np.asarray(point_parents(model), np.int32)
@@ -224,7 +224,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
     from rich.console import Console
     from rich.progress import Progress
 
-    from jcrowd.simulate import in_agent_order
+    from jcrowd.crowd.simulate import in_agent_order
 
     step = sim.compiled()
     n = sim.num_agents

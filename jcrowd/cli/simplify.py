@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from jcrowd.io.atomic import write_atomic
     from jcrowd.io.bvh import read_bvh
     from jcrowd.io.bvh_write import write_bvh
-    from jcrowd.motion import drop_tpose_frames
+    from jcrowd.motion.clip import drop_tpose_frames
     from jcrowd.simplify import RESULT, simplify_motion
 
     out_dir = Path(args.out_dir)

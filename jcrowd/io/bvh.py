@@ -1,10 +1,11 @@
-"""BVH motion files: read any channel layout into a :class:`~jcrowd.motion.Motion`, write one back.
+"""BVH motion files: read any channel layout into a :class:`~jcrowd.motion.clip.Motion`, write one
+back.
 
 NumPy only (no jax operation runs here). Conventions (DESIGN §3):
 
 - Rotation channels ``Zrotation Yrotation Xrotation`` mean ``R = Rz @ Ry @ Rx`` (intrinsic, in
   listed order): degrees in the file, unit quaternions ``(w, x, y, z)`` in the clip, converted in
-  float64 by :mod:`jcrowd.rotation`. Every joint may have its own order, with its position
+  float64 by :mod:`jcrowd.motion.rotation`. Every joint may have its own order, with its position
   channels anywhere in the list.
 - Lengths become metres by a per-file ``scale`` (file units → metres). ``scale=None`` detects the
   unit from the rest-pose height ``H`` (max − min y of joints and End Sites): ``H < 3`` metres,
@@ -20,7 +21,7 @@ Position channels on a non-root joint must be constant (their value joins that j
 and is written back as zeros); varying ones raise. ``fps = 1 / Frame Time``, snapped to a
 whole number when within 1e-5 of one (``.0083333`` is 1/120 printed to 7 digits). Frame
 values are one token stream (line breaks do not matter) of exactly ``Frames × channels`` values;
-no frame is dropped (that is :func:`jcrowd.motion.drop_tpose_frames`'s job). Every malformed
+no frame is dropped (that is :func:`jcrowd.motion.clip.drop_tpose_frames`'s job). Every malformed
 input raises :class:`~jcrowd.errors.BVHError` citing ``path:line``; nothing is half-read.
 Writing goes to a temporary file in the target folder, renamed into place.
 """
@@ -37,11 +38,11 @@ from typing import Any
 import numpy as np
 
 from jcrowd.errors import BVHError, where
-from jcrowd.motion import Motion
-from jcrowd.rotation import euler_to_quat, quat_to_euler
-from jcrowd.skeleton import Skeleton, rest_positions
+from jcrowd.motion.clip import Motion
+from jcrowd.motion.rotation import euler_to_quat, quat_to_euler
+from jcrowd.motion.skeleton import Skeleton, rest_positions
 
-__all__ = ["UNIT_SCALES", "BVHClip", "load_bvh", "read_bvh", "write_bvh"]  # noqa: F822 (lazy)
+__all__ = ["UNIT_SCALES", "BVHClip", "load_bvh", "read_bvh"]
 
 UNIT_SCALES: dict[str, float] = {"m": 1.0, "cmu": 0.056444, "in": 0.0254, "cm": 0.01, "mm": 0.001}
 """Known file units and their size in metres (DESIGN §4.1)."""
@@ -347,13 +348,3 @@ def _euler(x: np.ndarray, orders: list[str], *, to_quat: bool) -> np.ndarray:
         else:
             out[:, idx] = np.degrees(quat_to_euler(x[:, idx], order))
     return out
-
-
-def __getattr__(name: str) -> object:
-    # The writer lives in its own module (it imports this one's helpers); it is re-exported
-    # here lazily so ``from jcrowd.io.bvh import write_bvh`` works without an import cycle.
-    if name == "write_bvh":
-        from jcrowd.io.bvh_write import write_bvh
-
-        return write_bvh
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

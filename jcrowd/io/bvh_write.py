@@ -17,8 +17,8 @@ from jcrowd.io.bvh import (
     _euler,
     _require,
 )
-from jcrowd.motion import Motion
-from jcrowd.skeleton import Skeleton
+from jcrowd.motion.clip import Motion
+from jcrowd.motion.skeleton import Skeleton
 
 __all__ = ["write_bvh"]
 

@@ -18,8 +18,8 @@ from jcrowd.errors import StoreError
 from jcrowd.io.store import load_store, save_store, skeleton_from_json, skeleton_to_json
 from jcrowd.kriging.universal import KrigingModel
 from jcrowd.kriging.variogram_fit import VariogramFit
-from jcrowd.model import MotionLevel, MotionModel
-from jcrowd.posevec import PoseLayout
+from jcrowd.model.motion_model import MotionLevel, MotionModel
+from jcrowd.model.posevec import PoseLayout
 
 __all__ = ["KIND", "load_motion_model", "save_motion_model"]
 

@@ -52,7 +52,7 @@ def write_fit_report(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from jcrowd.model import model_reliability
+    from jcrowd.model.motion_model import model_reliability
 
     out = Path(folder)
     try:
@@ -124,7 +124,7 @@ def write_fit_report(
 
 
 def _names() -> tuple[str, ...]:
-    from jcrowd.samples import CONTROL_NAMES
+    from jcrowd.model.samples import CONTROL_NAMES
 
     return CONTROL_NAMES
 

@@ -28,11 +28,10 @@ import numpy as np
 
 from jcrowd.errors import StoreError, where
 from jcrowd.io.atomic import write_atomic
-from jcrowd.skeleton import Skeleton
+from jcrowd.motion.skeleton import Skeleton
 
 __all__ = [
     "FORMAT_VERSION",
-    "StoreError",
     "load_store",
     "save_store",
     "skeleton_from_json",

@@ -47,9 +47,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jcrowd.errors import MotionError
-from jcrowd.motion import Motion
-from jcrowd.rotation import _xp, quat_rotate
-from jcrowd.skeleton import Skeleton, rest_positions
+from jcrowd.motion.clip import Motion
+from jcrowd.motion.rotation import _xp, quat_rotate
+from jcrowd.motion.skeleton import Skeleton, rest_positions
 
 __all__ = [
     "JointAnalysis",

@@ -30,8 +30,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from jcrowd.errors import MotionError
-from jcrowd.rotation import quat_rotate
-from jcrowd.skeleton import Skeleton, forward_kinematics
+from jcrowd.motion.rotation import quat_rotate
+from jcrowd.motion.skeleton import Skeleton, forward_kinematics
 
 __all__ = ["LevelPlan", "Weights", "joint_counts", "plan_level", "position_problem"]
 

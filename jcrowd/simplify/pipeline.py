@@ -1,8 +1,8 @@
 """Joint simplification into levels (paper 003 §4–5): analysis → freezing → SQP → rotations.
 
-:func:`simplify_motion` returns, per level, a normal :class:`~jcrowd.motion.Motion` on the level's
-skeleton (it can be written as BVH), the kept joint ids, and its errors. The per-frame position
-problems of a level are solved together: one ``vmap``-ped, ``jit``-compiled SQP per
+:func:`simplify_motion` returns, per level, a normal :class:`~jcrowd.motion.clip.Motion` on the
+level's skeleton (it can be written as BVH), the kept joint ids, and its errors. The per-frame
+position problems of a level are solved together: one ``vmap``-ped, ``jit``-compiled SQP per
 (skeleton, level) structure.
 
 Local rotations are recovered from the optimised positions by :mod:`jcrowd.simplify.recover`.
@@ -26,7 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from jcrowd.errors import MotionError
-from jcrowd.motion import Motion
+from jcrowd.motion.clip import Motion
+from jcrowd.motion.skeleton import forward_kinematics
 from jcrowd.simplify.analysis import analyse_motion, elimination_order, key_posture
 from jcrowd.simplify.levels import (
     PositionProblem,
@@ -38,7 +39,6 @@ from jcrowd.simplify.levels import (
 )
 from jcrowd.simplify.recover import expand_rotations, recover_rotations
 from jcrowd.simplify.sqp import RESULT, sqp_solve
-from jcrowd.skeleton import forward_kinematics
 
 DEFAULT_WEIGHTS = Weights()
 

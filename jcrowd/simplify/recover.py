@@ -21,7 +21,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from jcrowd.rotation import quat_conj, quat_from_matrix, quat_mul, quat_normalize, quat_rotate
+from jcrowd.motion.rotation import (
+    quat_conj,
+    quat_from_matrix,
+    quat_mul,
+    quat_normalize,
+    quat_rotate,
+)
 from jcrowd.simplify.levels import LevelPlan
 
 __all__ = ["expand_rotations", "recover_rotations"]

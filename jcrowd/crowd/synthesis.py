@@ -3,8 +3,8 @@
 A clip is fixed by its control vector ``c``; what the step keeps per agent is the clip's
 *mixing vector* ``a = [b(c); 1; ĉ]`` — the kriging weights (001 Eq. 3) followed by the trend
 basis — because the model's one variogram makes ``b(c)`` the same at every level
-(:mod:`jcrowd.model`). At level ``l`` the core is ``K(c) = Σ_k a_k V_k`` with ``V`` the residual
-cores and the trend planes (000 Eq. 8), and the pose vector at aligned frame ``τ`` is
+(:mod:`jcrowd.model.motion_model`). At level ``l`` the core is ``K(c) = Σ_k a_k V_k`` with ``V``
+the residual cores and the trend planes (000 Eq. 8), and the pose vector at aligned frame ``τ`` is
 ``y = U_P K(c) w_T(τ)`` with ``w_T(τ)`` the linear interpolation of rows of ``U_T`` (000 Eq. 5).
 
 Per agent-frame: ``K(c) = a V`` (``A × R_P R_T``; under ``vmap`` one GEMM for a whole bucket;
@@ -38,9 +38,9 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from jcrowd.kriging.universal import KrigingModel, kriging_weights
-from jcrowd.model import MotionModel
-from jcrowd.rotation import quat_from_expmap, quat_mul, quat_rotate, quat_to_matrix, yaw_quat
-from jcrowd.skeleton import Skeleton, forward_kinematics
+from jcrowd.model.motion_model import MotionModel
+from jcrowd.motion.rotation import quat_from_expmap, quat_mul, quat_rotate, quat_to_matrix, yaw_quat
+from jcrowd.motion.skeleton import Skeleton, forward_kinematics
 
 __all__ = [
     "Decoders",

@@ -1,10 +1,10 @@
-"""Reading scenario files: TOML → :class:`~jcrowd.scenario.Scenario`, with key-path errors.
+"""Reading scenario files: TOML → :class:`~jcrowd.scenario.schema.Scenario`, with key-path errors.
 
 :func:`load_scenario` reads the file (the only IO besides checking that a model file exists);
 :func:`parse_scenario` walks the tables — unknown and missing keys — and builds the dataclasses
-of :mod:`jcrowd.scenario`, which check their own values; every message is prefixed with the file
-and the key path (``plaza.toml: groups[2].count: expected …, found …``). Both are re-exported by
-:mod:`jcrowd.scenario`.
+of :mod:`jcrowd.scenario.schema`, which check their own values; every message is prefixed with the
+file and the key path (``plaza.toml: groups[2].count: expected …, found …``). Both are re-exported
+by :mod:`jcrowd.scenario.schema`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,8 @@ from collections.abc import Callable, Sequence
 from typing import Any, NoReturn, TypeVar
 
 from jcrowd.errors import ScenarioError, where
-from jcrowd.scenario import (
+from jcrowd.scenario.check import Problem, show
+from jcrowd.scenario.schema import (
     Camera,
     CameraKey,
     Group,
@@ -26,7 +27,6 @@ from jcrowd.scenario import (
     Region,
     Scenario,
 )
-from jcrowd.scenario_check import Problem, show
 
 __all__ = ["load_scenario", "parse_scenario"]
 

@@ -1,41 +1,23 @@
-"""Where a scenario's agents start: polygon geometry for regions, and :func:`spawn`.
+"""Where a scenario's agents start: :func:`spawn` places every group's agents and paths.
 
-Conventions (shared with :mod:`jcrowd.scenario`): the ground is the x–z plane, y up; a point on
-it is ``[x, z]`` in metres. Heading θ (radians, in (−π, π]) means facing ``(sin θ, 0, cos θ)``:
+Conventions (shared with :mod:`jcrowd.scenario.schema`): the ground is the x–z plane, y up; a point
+on it is ``[x, z]`` in metres. Heading θ (radians, in (−π, π]) means facing ``(sin θ, 0, cos θ)``:
 θ = 0 faces +z and a positive yaw turns the walker to its left, towards +x (facing +z with y up,
-+x is on the left, as in :mod:`jcrowd.gait`). The left of heading θ is ``(cos θ, −sin θ)`` in
++x is on the left, as in :mod:`jcrowd.motion.gait`). The left of heading θ is ``(cos θ, −sin θ)`` in
 x–z. A positive lateral offset moves a path to its walker's left.
-
-Polygons are simple (no crossing or touching edges) with positive area; either orientation is
-accepted. They are sampled through an ear-clipping triangulation, each triangle chosen with
-probability proportional to its area, so samples are uniform over the polygon.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, cast
+from typing import cast
 
 import numpy as np
 from jaxtyping import Bool, Float, Int
 
-if TYPE_CHECKING:
-    from jcrowd.scenario import Region, Scenario
+from jcrowd.scenario.schema import Region, Scenario
 
-__all__ = [
-    "LATERAL_JITTER_M",
-    "MIN_POLYGON_AREA_M2",
-    "Spawn",
-    "polygon_area",
-    "polygon_contains",
-    "polygon_problem",
-    "sample_triangles",
-    "spawn",
-    "triangulate",
-]
-
-MIN_POLYGON_AREA_M2 = 1e-6
-"""Polygons of this area or less are degenerate (collinear points)."""
+__all__ = ["LATERAL_JITTER_M", "Spawn", "spawn"]
 
 LATERAL_JITTER_M = 1.0
 """Largest lateral offset of an agent's copy of its group's path (metres)."""
@@ -58,145 +40,6 @@ _PALETTE = np.array(
     ],
     np.float32,
 )
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
-def polygon_area(points: Float[np.ndarray, "P 2"]) -> float:
-    """Signed area (shoelace, m²); positive when the points turn from +x towards +z."""
-    nxt = np.roll(points, -1, axis=0)
-    return 0.5 * float(np.sum(_cross(points, nxt)))
-
-
-def _crossing_edges(points: np.ndarray) -> tuple[int, int] | None:
-    """First pair of edges that cross or touch (edge k joins points[k] and points[k+1])."""
-    n = len(points)
-    a, b = points, np.roll(points, -1, axis=0)
-    # Two edges that meet at their shared vertex must not fold back over each other.
-    fold = (_cross(b - a, np.roll(b - a, -1, axis=0)) == 0) & (
-        np.sum((a - b) * (np.roll(b, -1, axis=0) - b), axis=1) > 0
-    )
-    if fold.any():
-        k = int(np.argmax(fold))
-        return k, (k + 1) % n
-    A, B, C, D = a[:, None], b[:, None], a[None], b[None]
-    d1, d2 = _cross(D - C, A - C), _cross(D - C, B - C)
-    d3, d4 = _cross(B - A, C - A), _cross(B - A, D - A)
-
-    def on(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
-        return np.all((np.minimum(p, q) <= r) & (r <= np.maximum(p, q)), axis=-1)
-
-    hit = ((d1 * d2 < 0) & (d3 * d4 < 0)) | (
-        ((d1 == 0) & on(C, D, A))
-        | ((d2 == 0) & on(C, D, B))
-        | ((d3 == 0) & on(A, B, C))
-        | ((d4 == 0) & on(A, B, D))
-    )
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    hit &= (j > i + 1) & ~((i == 0) & (j == n - 1))
-    if not hit.any():
-        return None
-    first = np.argwhere(hit)[0]
-    return int(first[0]), int(first[1])
-
-
-def polygon_problem(points: Float[np.ndarray, "P 2"]) -> str | None:
-    """Why ``points`` is not a simple polygon of positive area ("expected …, found …"), or None."""
-    n = len(points)
-    if n < 3:
-        return f"expected at least 3 points [x, z], found {n}"
-    same = np.all(points == np.roll(points, -1, axis=0), axis=1)
-    if same[-1]:
-        return (
-            "expected distinct points, found the last point repeating points[0] "
-            "(a polygon closes by itself)"
-        )
-    if same.any():
-        k = int(np.argmax(same))
-        return f"expected distinct consecutive points, found points[{k + 1}] repeating points[{k}]"
-    centred = points - points.mean(axis=0)
-    spread = np.linalg.svd(centred, compute_uv=False)
-    if spread[1] <= 1e-12 * spread[0]:
-        return "expected points spanning an area, found them all on one line (collinear)"
-    crossing = _crossing_edges(points)
-    if crossing is not None:
-        i, j = crossing
-        return (
-            f"expected a simple polygon, found edges {i} and {j} crossing or touching "
-            f"(edge k joins points[k] and points[k+1])"
-        )
-    area = abs(polygon_area(points))
-    if area <= MIN_POLYGON_AREA_M2:
-        return f"expected a polygon of area > {MIN_POLYGON_AREA_M2:g} m², found {area:.3g} m²"
-    return None
-
-
-def _in_triangle(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Points ``p`` inside or on the positively oriented triangle ``abc``."""
-    return (_cross(b - a, p - a) >= 0) & (_cross(c - b, p - b) >= 0) & (_cross(a - c, p - c) >= 0)
-
-
-def triangulate(points: Float[np.ndarray, "P 2"]) -> Float[np.ndarray, "T 3 2"]:
-    """Ear-clipping triangulation of a simple polygon (positively oriented triangles).
-
-    A vertex where the boundary runs straight on is dropped without a triangle, so T ≤ P − 2.
-    """
-    pts = np.asarray(points, np.float64)
-    if polygon_area(pts) < 0:
-        pts = pts[::-1]
-    idx = list(range(len(pts)))
-    triangles = []
-    while len(idx) > 3:
-        ring = pts[idx]
-        prev, nxt = np.roll(ring, 1, axis=0), np.roll(ring, -1, axis=0)
-        turn = _cross(ring - prev, nxt - ring)
-        m, ear = len(idx), -1
-        for k in range(m):
-            if turn[k] == 0:
-                ear = k
-                break
-            others = np.delete(ring, [(k - 1) % m, k, (k + 1) % m], axis=0)
-            if turn[k] > 0 and not _in_triangle(others, prev[k], ring[k], nxt[k]).any():
-                ear = k
-                break
-        if ear < 0:  # only round-off can leave a simple polygon without an ear
-            ear = int(np.argmax(turn))
-        if turn[ear] != 0:
-            triangles.append(np.stack([prev[ear], ring[ear], nxt[ear]]))
-        del idx[ear]
-    triangles.append(pts[idx])
-    return np.stack(triangles)
-
-
-def sample_triangles(
-    triangles: Float[np.ndarray, "T 3 2"], rng: np.random.Generator, n: int
-) -> Float[np.ndarray, "n 2"]:
-    """``n`` points uniform over the union of ``triangles`` (which must not overlap)."""
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    area = 0.5 * np.abs(_cross(b - a, c - a))
-    tri = rng.choice(len(triangles), size=n, p=area / area.sum())
-    u = rng.random((n, 2))
-    flip = u.sum(axis=1) > 1.0  # reflect the far half of the unit square onto the triangle
-    u[flip] = 1.0 - u[flip]
-    return a[tri] + u[:, :1] * (b[tri] - a[tri]) + u[:, 1:] * (c[tri] - a[tri])
-
-
-def polygon_contains(
-    polygon: Float[np.ndarray, "P 2"], points: Float[np.ndarray, "M 2"]
-) -> Bool[np.ndarray, " M"]:
-    """Even–odd rule: inside when a ray towards +x crosses the boundary an odd number of times."""
-    x, z = points[:, 0], points[:, 1]
-    inside = np.zeros(len(points), bool)
-    n = len(polygon)
-    for i in range(n):
-        (xi, zi), (xj, zj) = polygon[i], polygon[(i + 1) % n]
-        if zi == zj:  # a horizontal edge is never crossed by a horizontal ray
-            continue
-        straddles = (zi > z) != (zj > z)
-        inside ^= straddles & (x < xi + (z - zi) * (xj - xi) / (zj - zi))
-    return inside
 
 
 def _left_of(d: np.ndarray) -> np.ndarray:

@@ -1,8 +1,9 @@
-"""Scenarios: a crowd described in TOML — ground, groups, camera, LOD settings, model, seed, time.
+"""The scenario data model: ground, groups, camera, LOD settings, model, seed and time.
 
-The file format is documented key by key in ``examples/README.md``. :func:`load_scenario` reads
-the file (the only IO besides checking that a model file exists); :func:`parse_scenario` checks
-and builds a :class:`Scenario`; :func:`spawn` (from :mod:`jcrowd.scenario_spawn`) places agents.
+The file format is documented key by key in ``examples/README.md``.
+:func:`~jcrowd.scenario.parse.load_scenario` reads a file and
+:func:`~jcrowd.scenario.parse.parse_scenario` builds a :class:`Scenario` from its tables;
+:func:`~jcrowd.scenario.spawning.spawn` places the agents.
 
 Conventions:
 
@@ -28,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from jaxtyping import Bool, Float
 
-from jcrowd.scenario_check import (
+from jcrowd.scenario.check import (
     Problem,
     Raw,
     is_int,
@@ -38,14 +39,12 @@ from jcrowd.scenario_check import (
     show,
     value_range,
 )
-from jcrowd.scenario_check import points as point_list
-from jcrowd.scenario_spawn import (
-    Spawn,
+from jcrowd.scenario.check import points as point_list
+from jcrowd.scenario.geometry import (
     polygon_area,
     polygon_contains,
     polygon_problem,
     sample_triangles,
-    spawn,
     triangulate,
 )
 
@@ -58,11 +57,7 @@ __all__ = [
     "Path",
     "Region",
     "Scenario",
-    "Spawn",
     "camera_at",
-    "load_scenario",
-    "parse_scenario",
-    "spawn",
 ]
 
 DEFAULT_THRESHOLDS_M = (30.0, 40.0, 50.0, 60.0, 80.0)
@@ -344,7 +339,7 @@ class LodSettings:
 class Scenario:
     """A whole scenario. ``model``: absolute path of a model file, or None for the shipped model.
     ``ground`` is a rect holding every spawn region, goal region and waypoint; ``seed`` ≥ 0
-    drives :func:`spawn`; ``duration_s`` and ``fps`` are positive."""
+    drives :func:`~jcrowd.scenario.spawning.spawn`; ``duration_s`` and ``fps`` are positive."""
 
     source: str = "<code>"
     model: str | None = None
@@ -400,8 +395,3 @@ def camera_at(camera: Camera, t: float) -> tuple[Float[np.ndarray, " 3"], Float[
     a, b = camera.keys[i], camera.keys[i + 1]
     s = (t - a.time) / (b.time - a.time)
     return a.eye + s * (b.eye - a.eye), a.target + s * (b.target - a.target)
-
-
-# The file reader lives in its own module; imported last because it builds these dataclasses.
-from jcrowd.scenario_toml import load_scenario as load_scenario  # noqa: E402
-from jcrowd.scenario_toml import parse_scenario as parse_scenario  # noqa: E402

@@ -15,11 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jcrowd.data import Clip
 from jcrowd.errors import DataError
-from jcrowd.gait import GaitCycle, character_height, gait_cycles
-from jcrowd.motion import Motion, mirror, normalize_root, resample, slice_frames
-from jcrowd.skeleton import Skeleton
+from jcrowd.motion.clip import Clip, Motion, mirror, normalize_root, resample, slice_frames
+from jcrowd.motion.gait import GaitCycle, character_height, gait_cycles
+from jcrowd.motion.skeleton import Skeleton
 
 __all__ = ["CONTROL_NAMES", "Sample", "gait_samples", "reference_skeleton"]
 

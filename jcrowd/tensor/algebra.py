@@ -3,8 +3,8 @@
 Owns the Tucker model of a motion tensor (DESIGN §2 ``tensor``, §4 steps 5 and 7): paper 000
 §3.2 and §4.1 (M ∈ R^{P×T×S} = Z ×1 U_P ×2 U_T ×3 U_S, truncated HOSVD, ALS refinement) and
 paper 004 §2 (natural modes actor × style × repetition, N-mode SVD, synthesis from mode rows).
-Natural-mode tensors live in :mod:`jcrowd.natural`, key levels and storage accounting in
-:mod:`jcrowd.keylevels`.
+Natural-mode tensors live in :mod:`jcrowd.tensor.natural`, key levels and storage accounting in
+:mod:`jcrowd.tensor.keylevels`.
 
 Conventions:
 
@@ -109,7 +109,7 @@ class Tucker:
     Attributes:
         core: ``(R_0, …, R_{N−1})`` core tensor Z.
         factors: ``N`` matrices, ``factors[n]`` of shape ``(I_n, R_n)``, orthonormal columns
-            (except U_P after :func:`jcrowd.keylevels.drop_pose_elements` removed rows).
+            (except U_P after :func:`jcrowd.tensor.keylevels.drop_pose_elements` removed rows).
     """
 
     core: Array
@@ -321,6 +321,6 @@ def relative_error(X: Float[Array, "*dims"], approx: Float[Array, "*dims"]) -> f
 
 
 def mean_squared_error(X: Float[Array, "*dims"], approx: Float[Array, "*dims"]) -> float:
-    """``‖X − X̂‖²_F / (I_0·I_1·…)``, paper 000 §4.2's E (see :mod:`jcrowd.keylevels`)."""
+    """``‖X − X̂‖²_F / (I_0·I_1·…)``, paper 000 §4.2's E (see :mod:`jcrowd.tensor.keylevels`)."""
     d = np.asarray(X, dtype=np.float64) - np.asarray(approx, dtype=np.float64)
     return float(np.mean(d * d))

@@ -1,7 +1,7 @@
 """Clip scheduling: the next gait cycle's control parameters from an agent's path (000 §5.2).
 
 When an agent passes the middle of its current cycle it chooses the next one, so near agents
-can blend it in over the second half (:mod:`jcrowd.crowd`). The choice, for one agent:
+can blend it in over the second half (:mod:`jcrowd.crowd.stepping`). The choice, for one agent:
 
 1. Predict where the current cycle ends: its start pose moved by the cycle's own controls
    ``(dx, dz, dyaw)`` (in the heading frame at the cycle start: z forward, x left, + yaw left).
@@ -37,12 +37,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from jcrowd.crowd.synthesis import Decoders, build_decoders, clip_weights
 from jcrowd.errors import KrigingError
-from jcrowd.fastmath import sincos
-from jcrowd.gait import find_feet
 from jcrowd.kriging.universal import reliability_one, weights_and_reliability
-from jcrowd.model import MotionModel
-from jcrowd.synthesis import Decoders, build_decoders, clip_weights
+from jcrowd.model.motion_model import MotionModel
+from jcrowd.motion.fastmath import sincos
+from jcrowd.motion.gait import find_feet
 
 __all__ = [
     "CrowdModel",

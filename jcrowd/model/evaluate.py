@@ -15,9 +15,9 @@ all samples) are shared by the folds — refitting them per fold would cost a fu
 both leak equally into all three methods, so the comparison stays fair. RBF and nearest see
 the same normalised controls as kriging. Every method is asked at the left-out controls clamped
 to the training samples' range, control by control, as the model and the crowd ask
-(:func:`jcrowd.model.clamp_controls`): on ``cmu/walk`` the backward/sideways take ``09_12`` lies
-outside the straight walks' range, and unclamped its linear trend extrapolated to 16.9 cm
-mean error (nearest sample 9.8 cm), which alone put kriging behind nearest (6.27 vs 5.29 cm
+(:func:`jcrowd.model.motion_model.clamp_controls`): on ``cmu/walk`` the backward/sideways take
+``09_12`` lies outside the straight walks' range, and unclamped its linear trend extrapolated to
+16.9 cm mean error (nearest sample 9.8 cm), which alone put kriging behind nearest (6.27 vs 5.29 cm
 over all folds); clamped, kriging 4.44, RBF 4.69, nearest 5.29 cm.
 """
 
@@ -29,28 +29,27 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from jcrowd.data import Clip
 from jcrowd.errors import DataError
-from jcrowd.footlock import lock_feet
-from jcrowd.gait import foot_contacts
 from jcrowd.kriging.rbf import fit_rbf, predict_nearest, predict_rbf
 from jcrowd.kriging.universal import fit_kriging, normalise_controls, predict
-from jcrowd.model import (
+from jcrowd.model.motion_model import (
     MotionModel,
     clamp_controls,
     model_reliability,
     sample_cores,
     synthesize_clip,
 )
-from jcrowd.motion import Motion, joint_positions
-from jcrowd.posevec import decode_clip
-from jcrowd.samples import CONTROL_NAMES, gait_samples
-from jcrowd.tensor_model import TensorModel, root_frame_positions
+from jcrowd.model.posevec import decode_clip
+from jcrowd.model.samples import CONTROL_NAMES, gait_samples
+from jcrowd.model.tensor_model import TensorModel, root_frame_positions
+from jcrowd.motion.clip import Clip, Motion, joint_positions
+from jcrowd.motion.footlock import lock_feet
+from jcrowd.motion.gait import foot_contacts
 
-__all__ = ["ALL_METHODS", "METHODS", "evaluate_captures", "foot_skate", "leave_one_clip_out"]
+__all__ = ["ALL_CV_METHODS", "CV_METHODS", "evaluate_captures", "foot_skate", "leave_one_clip_out"]
 
-METHODS = ("kriging", "per_pose", "rbf", "nearest")
-ALL_METHODS = (*METHODS, "per_element")
+CV_METHODS = ("kriging", "per_pose", "rbf", "nearest")
+ALL_CV_METHODS = (*CV_METHODS, "per_element")
 
 
 def leave_one_clip_out(
@@ -58,7 +57,7 @@ def leave_one_clip_out(
     controls: Sequence[str] = ("dx", "dz", "dyaw"),
     *,
     level: int = 0,
-    methods: Sequence[str] = METHODS,
+    methods: Sequence[str] = CV_METHODS,
     skate: bool = False,
 ) -> dict[str, dict[str, float]]:
     """``{method: {"joint_m", "max_joint_m", "root_m"}}`` over every left-out clip (module doc).
@@ -161,8 +160,8 @@ def _decoded(tensor: TensorModel, y: np.ndarray, height: float) -> Motion:
 def foot_skate(motion: Motion) -> float:
     """Mean horizontal slide (m per frame) of a foot in contact, over both feet.
 
-    On every contact frame (:func:`jcrowd.gait.foot_contacts`) the foot's planted joint is the
-    lower of its ankle and toe (heel down, then toe down); its horizontal displacement to the
+    On every contact frame (:func:`jcrowd.motion.gait.foot_contacts`) the foot's planted joint is
+    the lower of its ankle and toe (heel down, then toe down); its horizontal displacement to the
     next frame is the slide. A perfect plant slides 0; a capture's own value (marker noise, the
     heel-to-toe roll) is the reference to compare a synthesized clip with, at the same frame rate.
     """
@@ -199,7 +198,7 @@ def evaluate_captures(
     the model's skeleton (joint names).
 
     The prediction is what jcrowd delivers: with ``foot_lock`` (the default, as in the crowd
-    step and ``jcrowd export``) planted feet are locked (:func:`jcrowd.footlock.lock_feet`).
+    step and ``jcrowd export``) planted feet are locked (:func:`jcrowd.motion.footlock.lock_feet`).
     Why the raw decode slides: the time mode keeps ``R_T`` = 30 of 100 aligned frames, which
     smooths the heel strike — measured on four ``cmu/walk`` samples, projecting only their time
     mode onto 30 components raises skate from 0.16 (the capture) to 0.58 cm per frame, and it

@@ -21,7 +21,7 @@ scale with the character's height (defaults are for a 1.75 m person).
 Control parameters of a cycle, in the heading frame at its start (z forward, x to the
 character's left, Y up; DESIGN §3): ``dx, dz`` root displacement (m), ``dyaw`` heading change
 (radians, + = left turn), ``speed`` mean speed along the path (m/s), ``height`` the character's
-standing height (m). The heading is the root's yaw (:func:`jcrowd.motion.headings`); since a
+standing height (m). The heading is the root's yaw (:func:`jcrowd.motion.clip.headings`); since a
 cycle starts and ends at the same gait phase, the pelvis' own yaw oscillation cancels out.
 
 Everything here runs on NumPy: it is offline analysis with data-dependent lengths.
@@ -36,8 +36,8 @@ from itertools import pairwise
 import numpy as np
 
 from jcrowd.errors import MotionError
-from jcrowd.motion import Motion, headings, joint_positions, left_right_pairs
-from jcrowd.skeleton import Skeleton, rest_positions
+from jcrowd.motion.clip import Motion, headings, joint_positions, left_right_pairs
+from jcrowd.motion.skeleton import Skeleton, rest_positions
 
 __all__ = [
     "ContactThresholds",

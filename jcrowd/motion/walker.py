@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 
 from jcrowd.errors import MotionError
-from jcrowd.motion import Motion
-from jcrowd.rotation import (
+from jcrowd.motion.clip import Motion
+from jcrowd.motion.rotation import (
     quat_canonical,
     quat_conj,
     quat_from_axis_angle,
@@ -44,7 +44,7 @@ from jcrowd.rotation import (
     quat_mul,
     yaw_quat,
 )
-from jcrowd.skeleton import Skeleton, rest_positions
+from jcrowd.motion.skeleton import Skeleton, rest_positions
 
 __all__ = ["STANCE_FRACTION", "WalkTruth", "procedural_walk", "walker_skeleton"]
 

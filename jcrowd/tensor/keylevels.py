@@ -30,7 +30,7 @@ Readings of the extracted text (say which, and why):
   still compute them and would pose them at exp-map 0 (the rest pose) rather than the frozen
   key posture; the caller fills them from the key posture (paper 003).
 
-NumPy float64 throughout, as in :mod:`jcrowd.tensor` (every rank tried changes every shape).
+NumPy float64 throughout, as in :mod:`jcrowd.tensor.algebra` (every rank tried changes every shape).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ import numpy as np
 from jaxtyping import Float, Int
 
 from jcrowd.errors import TensorError
-from jcrowd.tensor import RESULT, Tucker, TuckerResult, hooi, truncate, unfold
+from jcrowd.tensor.algebra import RESULT, Tucker, TuckerResult, hooi, truncate, unfold
 
 __all__ = [
     "AccuracyLevel",
@@ -159,7 +159,7 @@ def key_levels(
         M: motion tensor (P, T, S) (any order ≥ 2 works).
         n_levels: N ≥ 2 key levels.
         max_ranks, min_ranks: (R_P, R_T, R_S) of key levels 1 and N.
-        max_iter, tol: passed to :func:`jcrowd.tensor.hooi`.
+        max_iter, tol: passed to :func:`jcrowd.tensor.algebra.hooi`.
     """
     M = np.asarray(M, dtype=np.float64)
     path = rank_path(max_ranks, min_ranks)

@@ -25,7 +25,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from jcrowd.fastmath import sincos
+from jcrowd.motion.fastmath import sincos
 
 __all__ = [
     "EULER_ORDERS",
@@ -63,8 +63,8 @@ def _xp(*arrays: Any) -> ModuleType:
 
 
 def _sincos(xp: ModuleType, x: Any) -> tuple[Any, Any]:
-    """``(sin x, cos x)``: NumPy's for NumPy input, else :func:`jcrowd.fastmath.sincos` (XLA:CPU
-    does not vectorise its own ``sin``/``cos``; 10× slower in the crowd step's kernels)."""
+    """``(sin x, cos x)``: NumPy's for NumPy input, else :func:`jcrowd.motion.fastmath.sincos`
+    (XLA:CPU does not vectorise its own ``sin``/``cos``; 10× slower in the crowd step's kernels)."""
     if xp is np:
         return np.sin(x), np.cos(x)
     return sincos(x)

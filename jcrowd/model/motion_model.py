@@ -31,17 +31,17 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
-from jcrowd import footlock
 from jcrowd.errors import KrigingError
 from jcrowd.kriging.rbf import fit_rbf, predict_nearest, predict_rbf
 from jcrowd.kriging.system import trend_basis
 from jcrowd.kriging.universal import KrigingModel, fit_kriging, predict, reliability
-from jcrowd.motion import Motion
-from jcrowd.posevec import PoseLayout, decode_clip
-from jcrowd.samples import CONTROL_NAMES
-from jcrowd.skeleton import Skeleton
-from jcrowd.tensor import mode_product
-from jcrowd.tensor_model import TensorModel
+from jcrowd.model.posevec import PoseLayout, decode_clip
+from jcrowd.model.samples import CONTROL_NAMES
+from jcrowd.model.tensor_model import TensorModel
+from jcrowd.motion import footlock
+from jcrowd.motion.clip import Motion
+from jcrowd.motion.skeleton import Skeleton
+from jcrowd.tensor.algebra import mode_product
 
 __all__ = [
     "METHODS",
@@ -213,7 +213,7 @@ def synthesize_clip(
 
     Starts above the origin facing +Z; the skeleton is the reference scaled to ``height``
     (default: the control named ``height`` if kriged, else the model's default height).
-    ``lock_feet`` applies :func:`jcrowd.footlock.lock_feet` (planted feet stop sliding; the
+    ``lock_feet`` applies :func:`jcrowd.motion.footlock.lock_feet` (planted feet stop sliding; the
     root's path shifts by a few cm per cycle, measured 6 cm on average on ``cmu16``).
     Controls outside the model's range are clamped to it (module doc); ``method`` picks kriging
     or a baseline (:func:`level_cores`).

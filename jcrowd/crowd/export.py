@@ -1,12 +1,13 @@
-"""One agent of a recorded run as a full-detail :class:`~jcrowd.motion.Motion` (for BVH export).
+"""One agent of a recorded run as a full-detail :class:`~jcrowd.motion.clip.Motion` (for BVH
+export).
 
 A recording made with ``jcrowd run --record all`` holds, per step and agent, the root position
 and heading, the phase τ, the current and next clip's controls and whether a next clip was
 chosen. That is enough to re-synthesize the agent at level 0 whatever level it was drawn at:
 the pose vector at each step is the kriged clip at τ (000 Eqs. 4–5, 8), blended with the next
-clip over the second half of the cycle exactly as :mod:`jcrowd.crowd` blends near agents, and
-the root is put where the run put it. Every joint of the model's skeleton is written (joints a
-level drops keep their reference rotation), scaled to the agent's height.
+clip over the second half of the cycle exactly as :mod:`jcrowd.crowd.stepping` blends near
+agents, and the root is put where the run put it. Every joint of the model's skeleton is
+written (joints a level drops keep their reference rotation), scaled to the agent's height.
 """
 
 from __future__ import annotations
@@ -18,9 +19,9 @@ import numpy as np
 
 from jcrowd.errors import JcrowdError
 from jcrowd.kriging.universal import predict
-from jcrowd.model import MotionModel
-from jcrowd.motion import Motion
-from jcrowd.rotation import quat_from_expmap, quat_mul, quat_normalize, yaw_quat
+from jcrowd.model.motion_model import MotionModel
+from jcrowd.motion.clip import Motion
+from jcrowd.motion.rotation import quat_from_expmap, quat_mul, quat_normalize, yaw_quat
 
 __all__ = ["RECORD_KEYS", "agent_motion"]
 

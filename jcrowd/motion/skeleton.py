@@ -26,7 +26,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from jcrowd.errors import SkeletonError
-from jcrowd.rotation import _xp, quat_mul, quat_rotate
+from jcrowd.motion.rotation import _xp, quat_mul, quat_rotate
 
 __all__ = [
     "Skeleton",

@@ -2,44 +2,41 @@
 
 The first half of the fit (DESIGN §4 steps 1–7; papers 000 §3.2, §4.1–4.3 and 004 §2–3):
 
-1. clips → gait-cycle samples at the model rate, mirrored (:mod:`jcrowd.samples`);
+1. clips → gait-cycle samples at the model rate, mirrored (:mod:`jcrowd.model.samples`);
 2. the joint order for levels from joint importance summed over the dataset (paper 003 Eq. 3,
    :mod:`jcrowd.simplify`);
 3. every sample aligned by DTW to a reference sample on pose features divided by body height
    (:mod:`jcrowd.align`), its warp resampled to ``T`` frames;
-4. pose vectors (:mod:`jcrowd.posevec`), scaled per element, stacked into ``M ∈ R^{P×T×S}``;
-5. key levels by the greedy search of 000 §4.2 (:mod:`jcrowd.keylevels`); key level ``l`` also
-   keeps only the most important joints (000 §4.3): the pose elements of the others are not
+4. pose vectors (:mod:`jcrowd.model.posevec`), scaled per element, stacked into ``M ∈ R^{P×T×S}``;
+5. key levels by the greedy search of 000 §4.2 (:mod:`jcrowd.tensor.keylevels`); key level ``l``
+   also keeps only the most important joints (000 §4.3): the pose elements of the others are not
    synthesized and those joints stay at their reference (dataset-mean) rotation, which is the
    tensor model's key posture.
 
 The reference sample is the medoid of the samples under the DTW-free pose distance of their
 time-normalised feature curves (the sample the others are closest to), so no sample has to warp
-far. :func:`build_tensor_model` is pure (no files); :func:`save_tensor_model` and
-:func:`load_tensor_model` use :mod:`jcrowd.io.store`.
+far. :func:`build_tensor_model` is pure (no files); :mod:`jcrowd.io.tensor_file` saves and loads
+the result.
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
 from jcrowd.align import align_to_reference, pose_features
-from jcrowd.data import Clip
 from jcrowd.errors import DataError
-from jcrowd.io.store import load_store, save_store, skeleton_from_json, skeleton_to_json
-from jcrowd.keylevels import StorageReport, key_levels, tucker_storage
-from jcrowd.motion import resample
-from jcrowd.posevec import PoseLayout, decode_pose_vectors, encode_sample, mean_rotations
-from jcrowd.rotation import quat_rotate, yaw_quat
-from jcrowd.samples import CONTROL_NAMES, Sample, gait_samples, reference_skeleton
+from jcrowd.model.posevec import PoseLayout, decode_pose_vectors, encode_sample, mean_rotations
+from jcrowd.model.samples import CONTROL_NAMES, Sample, gait_samples, reference_skeleton
+from jcrowd.motion.clip import Clip, resample
+from jcrowd.motion.rotation import quat_rotate, yaw_quat
+from jcrowd.motion.skeleton import Skeleton, forward_kinematics
 from jcrowd.simplify import elimination_order, joint_counts, joint_importance
-from jcrowd.skeleton import Skeleton, forward_kinematics
-from jcrowd.tensor import Tucker, reconstruct
+from jcrowd.tensor.algebra import Tucker, reconstruct
+from jcrowd.tensor.keylevels import StorageReport, key_levels, tucker_storage
 
 __all__ = [
     "TensorLevel",
@@ -47,14 +44,10 @@ __all__ = [
     "TensorModelConfig",
     "build_tensor_model",
     "level_errors",
-    "load_tensor_model",
     "reconstruct_level",
     "root_frame_positions",
-    "save_tensor_model",
     "storage",
 ]
-
-KIND = "tensor-model"
 
 
 @dataclass(frozen=True)
@@ -102,7 +95,7 @@ class TensorModel:
         layout: pose-vector layout (references and element scales).
         order: joint elimination order (least important first).
         levels: key levels, finest first.
-        controls: ``(S, 5)`` every sample's :data:`~jcrowd.samples.CONTROL_NAMES`.
+        controls: ``(S, 5)`` every sample's :data:`~jcrowd.model.samples.CONTROL_NAMES`.
         groups: ``(S,)`` clip index per sample (a clip and its mirror share one).
         sources: clip path per group.
         mirrored: ``(S,)`` whether each sample is a mirror image.
@@ -265,59 +258,4 @@ def storage(model: TensorModel, itemsize: int = 4) -> StorageReport:
     """
     return tucker_storage(
         model.tensor, [lv.tucker for lv in model.levels], model.levels[0].mse, itemsize=itemsize
-    )
-
-
-def save_tensor_model(path: str | os.PathLike[str], model: TensorModel) -> None:
-    """Write the model file (safetensors + JSON metadata), atomically."""
-    tensors: dict[str, np.ndarray] = {
-        "tensor": model.tensor,
-        "layout/reference": model.layout.reference,
-        "layout/scale": model.layout.scale,
-        "samples/controls": model.controls,
-        "samples/groups": model.groups,
-        "samples/mirrored": model.mirrored.astype(np.uint8),
-    }
-    for i, lv in enumerate(model.levels):
-        tensors[f"level{i}/core"] = lv.tucker.core
-        for k, u in enumerate(lv.tucker.factors):
-            tensors[f"level{i}/factor{k}"] = u
-    meta = {
-        "config": asdict(model.config),
-        "skeleton": skeleton_to_json(model.skeleton),
-        "order": list(model.order),
-        "levels": [{"joints": list(lv.joints), "mse": lv.mse} for lv in model.levels],
-        "sources": list(model.sources),
-        "controls": list(CONTROL_NAMES),
-    }
-    save_store(path, tensors, meta, kind=KIND)
-
-
-def load_tensor_model(path: str | os.PathLike[str]) -> TensorModel:
-    """Read a file written by :func:`save_tensor_model` (checked: version, kind, checksum)."""
-    t, meta = load_store(path, kind=KIND)
-    cfg = dict(meta["config"])
-    for key in ("max_ranks", "min_ranks"):
-        cfg[key] = tuple(cfg[key]) if cfg[key] is not None else None
-    skel = skeleton_from_json(meta["skeleton"])
-    layout = PoseLayout(skel.num_joints, t["layout/reference"], t["layout/scale"])
-    levels = tuple(
-        TensorLevel(
-            Tucker(t[f"level{i}/core"], tuple(t[f"level{i}/factor{k}"] for k in range(3))),
-            tuple(lv["joints"]),
-            float(lv["mse"]),
-        )
-        for i, lv in enumerate(meta["levels"])
-    )
-    return TensorModel(
-        TensorModelConfig(**cfg),
-        skel,
-        layout,
-        tuple(meta["order"]),
-        levels,
-        t["samples/controls"],
-        t["samples/groups"],
-        tuple(meta["sources"]),
-        t["samples/mirrored"].astype(bool),
-        t["tensor"],
     )

@@ -1,7 +1,7 @@
 """Field checks shared by the scenario dataclasses: values, their TOML spelling in messages.
 
 Each check raises :class:`Problem` (a :class:`~jcrowd.errors.ScenarioError`) whose key is
-relative to the object being built; :mod:`jcrowd.scenario_toml` prefixes the file and the path.
+relative to the object being built; :mod:`jcrowd.scenario.parse` prefixes the file and the path.
 """
 
 from __future__ import annotations

@@ -2,25 +2,25 @@
 
 ``step(cm, config, state, view, dt) -> (state, frame)``:
 
-1. **LOD** (:mod:`jcrowd.lod`): agents outside the view frustum are culled, and so are agents
+1. **LOD** (:mod:`jcrowd.crowd.lod`): agents outside the view frustum are culled, and so are agents
    shorter on screen than ``min_pixels`` (*detail culling*: a figure a few pixels tall shows no
    limbs; the frame marks it as a ``dot`` for the renderer); the others get the finest level
    their camera distance allows (with hysteresis) and are bucketed into the levels' static
    capacities by importance. Agents beyond the last capacity become dots too (counted in
    ``overflow``).
-2. **Synthesis** per level (:mod:`jcrowd.synthesis`), ``vmap`` over the level's bucket padded to
-   its capacity, run only on the chunks of slots that hold agents (:func:`decode_bucket`): the
+2. **Synthesis** per level (:mod:`jcrowd.crowd.synthesis`), ``vmap`` over the level's bucket padded
+   to its capacity, run only on the chunks of slots that hold agents (:func:`decode_bucket`): the
    pose at phase τ, blended with the next clip for levels ≤
    ``blend_max_level``; FK on the level's skeleton; the root advances by the decoded velocity
    and yaw rate, and τ by ``dt · fps / ΔA(τ)`` (the inverse time-warp, 001 §3.5).
 3. **Culled agents** advance their root only, by dead reckoning along the arc their clip's
    controls ``(dx, dz, dyaw)`` describe, at the clip's mean rate (000 §4.3: "only the position
    and orientation of the root node are computed ... in an invisible area").
-4. **Clips** (:mod:`jcrowd.clips`): an agent passing the middle of its cycle chooses the next
+4. **Clips** (:mod:`jcrowd.crowd.clips`): an agent passing the middle of its cycle chooses the next
    (at most ``refresh`` agents per step, of which at most ``krige_budget`` synthesized ones get
    a kriged clip; the rest wait a step and are counted). Agents not synthesized this step get
    the nearest captured cycle to the controls they aim at, without a kriging solve
-   (:func:`jcrowd.clips.next_clips_lod`). At the cycle's end the next clip takes over.
+   (:func:`jcrowd.crowd.clips.next_clips_lod`). At the cycle's end the next clip takes over.
 
 Blending reading (000 §5 "blending the second half of the synthesized motion with the first
 half of the following motion"): the paper's clips are two strides, ours one gait cycle, so the
@@ -43,21 +43,24 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Int
 
-from jcrowd.clips import CrowdModel, local_to_world, next_clips_lod
-from jcrowd.crowd_state import CrowdState, Frame, init_state, refresh_far_cores
+from jcrowd.crowd.clips import CrowdModel, local_to_world, next_clips_lod
+from jcrowd.crowd.lod import (
+    CameraView,
+    assign_buckets,
+    distance_levels,
+    in_frustum,
+    screen_height_px,
+)
+from jcrowd.crowd.state import CrowdState, Frame, refresh_far_cores
+from jcrowd.crowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
 from jcrowd.errors import JcrowdError
-from jcrowd.fastmath import sincos
-from jcrowd.lod import CameraView, assign_buckets, distance_levels, in_frustum, screen_height_px
-from jcrowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
+from jcrowd.motion.fastmath import sincos
 
 __all__ = [
-    "CrowdState",
-    "Frame",
     "StepConfig",
     "bucket_chunk",
     "decode_bucket",
     "default_capacities",
-    "init_state",
     "step",
 ]
 
@@ -72,7 +75,7 @@ class StepConfig:
         hysteresis: band (m) round each threshold inside which the level does not change.
         blend_max_level: levels ≤ this blend clips; coarser ones switch at the frame.
         refresh: clips chosen per step at most (0: ``N / 32 + 64``, above the rate at which
-            1.1 s cycles end at 30 steps per second, N / 33; :func:`jcrowd.simulate.prepare`
+            1.1 s cycles end at 30 steps per second, N / 33; :func:`jcrowd.crowd.simulate.prepare`
             sets it from the frame rate and the model's shortest cycle).
         reach: a waypoint within this distance (m) counts as reached.
         importance: ``"distance"`` (nearer first) or ``"pixels"`` (taller on screen first).
@@ -87,7 +90,7 @@ class StepConfig:
         krige_budget: next clips kriged per step at most, for agents being synthesized (0:
             ``Σ capacities / 32 + 64``; ``prepare`` sets it like ``refresh`` for the agents
             the capacities hold); the others play the nearest captured cycle
-            (:func:`jcrowd.clips.next_clips_lod`).
+            (:func:`jcrowd.crowd.clips.next_clips_lod`).
     """
 
     capacities: tuple[int, ...]
@@ -171,7 +174,7 @@ def _agent_level(
     ``near``: blend into the next clip over the cycle's second half. ``lock``: move the root so
     that the stance foot stays put (see :func:`step`). ``cached``: the core is the agent's
     ``far_core`` (the coarsest level, kept current by
-    :func:`jcrowd.crowd_state.refresh_far_cores`).
+    :func:`jcrowd.crowd.state.refresh_far_cores`).
     """
     lv = cm.decoders.levels[level]
     last = float(cm.frames - 1)
@@ -233,7 +236,7 @@ def decode_bucket(
 
     ``fn`` maps ``(k,)`` agent ids to a pytree of ``(k, ...)`` arrays (a ``vmap``-ed one-agent
     function); ``used`` is how many leading slots hold agents (buckets are filled from the
-    front, :class:`jcrowd.lod.Buckets`). The first ``ceil(used / chunk)`` chunks run in a loop
+    front, :class:`jcrowd.crowd.lod.Buckets`). The first ``ceil(used / chunk)`` chunks run in a loop
     with a traced trip count — the shapes stay static, so a changing level histogram compiles
     nothing — and the rows of chunks not run are zero (their slots are not valid). Measured at
     100k agents on the bench plaza: levels 1–4 hold ~60–250 agents of their 512–4,096 slots,
@@ -365,7 +368,7 @@ def _schedule(
     """Waypoints, next-clip choice at mid-cycle (bounded per step) and clip hand-over.
 
     Agents synthesized this step get a kriged next clip, the others the nearest captured cycle
-    to the controls they aim at (:func:`jcrowd.clips.next_clips_lod`).
+    to the controls they aim at (:func:`jcrowd.crowd.clips.next_clips_lod`).
     """
     n = state.num_agents
     last = float(cm.frames - 1)

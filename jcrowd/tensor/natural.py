@@ -1,9 +1,9 @@
 """Natural-mode tensors (paper 004 §2): actor × style × repetition, synthesis from mode rows.
 
 The data of every sample (technical modes first) is arranged on a grid of natural modes; an
-N-mode SVD of the result (:func:`jcrowd.tensor.hosvd` with per-mode ranks) gives one factor per
-mode, and a new motion is synthesized from linear combinations of mode rows (:func:`synthesize`).
-Same conventions as :mod:`jcrowd.tensor` (NumPy float64, offline).
+N-mode SVD of the result (:func:`jcrowd.tensor.algebra.hosvd` with per-mode ranks) gives one factor
+per mode, and a new motion is synthesized from linear combinations of mode rows
+(:func:`synthesize`). Same conventions as :mod:`jcrowd.tensor.algebra` (NumPy float64, offline).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 from jaxtyping import Float, Int
 
 from jcrowd.errors import TensorError
-from jcrowd.tensor import (
+from jcrowd.tensor.algebra import (
     Tucker,
     multi_mode_product,
 )

@@ -4,7 +4,7 @@ A :class:`Motion` is a skeleton, per-frame local joint rotations ``(F, J, 4)``, 
 ``(F, 3)`` (metres, Y up) and a frame rate. Operations are free functions that return a new
 ``Motion`` (nothing is changed in place): slicing, resampling with slerp, dropping the leading
 T-pose frame(s) some BVH conversions add, root normalisation, and left↔right mirroring. Gait
-analysis (foot contacts, cycles, control parameters) lives in :mod:`jcrowd.gait`.
+analysis (foot contacts, cycles, control parameters) lives in :mod:`jcrowd.motion.gait`.
 
 The offline path runs on NumPy arrays (a ``Motion`` read from BVH holds NumPy float32); the same
 functions accept jax arrays.
@@ -13,6 +13,7 @@ functions accept jax arrays.
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from typing import Any
 
 import equinox as eqx
@@ -20,7 +21,7 @@ import numpy as np
 from jaxtyping import Float
 
 from jcrowd.errors import MotionError
-from jcrowd.rotation import (
+from jcrowd.motion.rotation import (
     _xp,
     quat_mul,
     quat_normalize,
@@ -29,9 +30,10 @@ from jcrowd.rotation import (
     quat_yaw,
     yaw_quat,
 )
-from jcrowd.skeleton import HostOrDevice, Skeleton, forward_kinematics, rest_positions
+from jcrowd.motion.skeleton import HostOrDevice, Skeleton, forward_kinematics, rest_positions
 
 __all__ = [
+    "Clip",
     "Motion",
     "drop_tpose_frames",
     "headings",
@@ -82,6 +84,25 @@ class Motion(eqx.Module):
     def duration(self) -> float:
         """Seconds spanned by the frames: ``(F - 1) / fps``."""
         return (self.num_frames - 1) / self.fps
+
+
+@dataclass(frozen=True)
+class Clip:
+    """One clip of a dataset.
+
+    Attributes:
+        path: the BVH file it was read from.
+        motion: the clip in metres, leading T-pose frames already dropped.
+        dropped_frames: how many leading frames were dropped.
+        actor, style, repetition: labels from the labels file, ``None`` where unknown.
+    """
+
+    path: str
+    motion: Motion
+    dropped_frames: int
+    actor: str | None = None
+    style: str | None = None
+    repetition: int | None = None
 
 
 def joint_positions(motion: Motion) -> Any:

@@ -1,9 +1,10 @@
 """A scenario and a motion model → a ready-to-step crowd (pure; files are read elsewhere).
 
-:func:`prepare` turns a :class:`~jcrowd.scenario.Scenario` into the three things the step
-needs — the :class:`~jcrowd.clips.CrowdModel`, a static :class:`~jcrowd.crowd.StepConfig` and the
-first :class:`~jcrowd.crowd.CrowdState` — and :meth:`Simulation.view_at` gives the camera at a
-time. The step itself is compiled once per :class:`Simulation` (:meth:`Simulation.compiled`).
+:func:`prepare` turns a :class:`~jcrowd.scenario.schema.Scenario` into the three things the step
+needs — the :class:`~jcrowd.crowd.clips.CrowdModel`, a static
+:class:`~jcrowd.crowd.stepping.StepConfig` and the first :class:`~jcrowd.crowd.state.CrowdState`
+— and :meth:`Simulation.view_at` gives the camera at a time. The step itself is compiled once per
+:class:`Simulation` (:meth:`Simulation.compiled`).
 
 LOD settings and the model's level count: a scenario lists distance thresholds independently
 of the model it runs with. The first ``L − 1`` thresholds are used for an ``L``-level model;
@@ -24,13 +25,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jcrowd.clips import CrowdModel, build_crowd_model
-from jcrowd.crowd import CrowdState, Frame, StepConfig, default_capacities, init_state, step
+from jcrowd.crowd.clips import CrowdModel, build_crowd_model
+from jcrowd.crowd.lod import CameraView
+from jcrowd.crowd.state import CrowdState, Frame, init_state
+from jcrowd.crowd.stepping import StepConfig, default_capacities, step
 from jcrowd.errors import ScenarioError
-from jcrowd.lod import CameraView
-from jcrowd.model import MotionModel
-from jcrowd.scenario import Scenario, camera_at
-from jcrowd.scenario_spawn import Spawn, spawn
+from jcrowd.model.motion_model import MotionModel
+from jcrowd.scenario.schema import Scenario, camera_at
+from jcrowd.scenario.spawning import Spawn, spawn
 
 __all__ = [
     "Simulation",
@@ -282,7 +284,7 @@ def _per_device_step(crowd: CrowdModel, config: StepConfig, devices: list[Any]) 
         if state.interleave != k:
             raise ScenarioError(
                 f"sharding: expected a state placed on the {k} devices by "
-                f"jcrowd.simulate.shard_state (agents interleaved over them), found one laid "
+                f"jcrowd.crowd.simulate.shard_state (agents interleaved over them), found one laid "
                 f"out for {state.interleave} device(s)"
             )
         return mapped(state, view, dt)

@@ -3,8 +3,8 @@
 A synthesized cycle is an interpolation of captures; small frame-to-frame errors in the legs and
 in the decoded root velocity make a planted foot slide (measured: ~2.6× the captures' own slide
 on ``cmu16``). The classic clean-up used here moves only the root: between consecutive frames in
-which a foot is planted (:func:`jcrowd.gait.foot_contacts`; the planted joint is the lower of its
-ankle and toe), the root's horizontal step is reduced by the planted joint's horizontal slide
+which a foot is planted (:func:`jcrowd.motion.gait.foot_contacts`; the planted joint is the lower
+of its ankle and toe), the root's horizontal step is reduced by the planted joint's horizontal slide
 (averaged over both feet in double support). In single support the planted joint then stays
 exactly where it was; the legs' poses are untouched. The correction is horizontal only, so
 heights and the pose in the root frame are unchanged.
@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from jcrowd.gait import foot_contacts
-from jcrowd.motion import Motion, joint_positions
+from jcrowd.motion.clip import Motion, joint_positions
+from jcrowd.motion.gait import foot_contacts
 
 __all__ = ["lock_feet"]
 

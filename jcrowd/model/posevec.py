@@ -39,8 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from jcrowd.errors import MotionError
-from jcrowd.motion import Motion, rest_forward
-from jcrowd.rotation import (
+from jcrowd.motion.clip import Motion, rest_forward
+from jcrowd.motion.rotation import (
     quat_canonical,
     quat_conj,
     quat_from_expmap,
@@ -52,7 +52,7 @@ from jcrowd.rotation import (
     quat_yaw,
     yaw_quat,
 )
-from jcrowd.skeleton import Skeleton
+from jcrowd.motion.skeleton import Skeleton
 
 __all__ = [
     "PoseLayout",

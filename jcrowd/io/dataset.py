@@ -3,7 +3,7 @@
 A dataset is a folder searched recursively for ``*.bvh`` files (the extension matched in any
 case), read in the order of their relative paths (POSIX form, compared case-sensitively), so
 the same folder always gives the same clips in the same order. Each clip's leading T-pose or
-empty frames are dropped on loading (:func:`jcrowd.motion.drop_tpose_frames`, DESIGN §4.1).
+empty frames are dropped on loading (:func:`jcrowd.motion.clip.drop_tpose_frames`, DESIGN §4.1).
 
 Labels come from a CSV file (``labels.csv`` in the folder unless another is named) with a header
 row holding at least the columns ``file, actor, style, repetition`` (in any order; names are
@@ -12,8 +12,9 @@ path relative to the folder, with or without its ``.bvh`` extension; ``repetitio
 integer. A blank cell reads as "unknown" (``None``), as does every label of a clip the file
 does not list. Every problem is a :class:`~jcrowd.errors.DataError` naming ``path:line``.
 
-The procedural walker lives in :mod:`jcrowd.walker` and is re-exported here, since it is the
-dataset the package can always make without any files.
+Each clip is a :class:`~jcrowd.motion.clip.Clip` (a motion with its source and labels); the
+procedural walker, the dataset the package can always make without files, is
+:mod:`jcrowd.motion.walker`.
 """
 
 from __future__ import annotations
@@ -25,21 +26,9 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 from jcrowd.errors import DataError, where
-from jcrowd.motion import Motion, drop_tpose_frames
-from jcrowd.walker import STANCE_FRACTION as STANCE_FRACTION
-from jcrowd.walker import WalkTruth as WalkTruth
-from jcrowd.walker import procedural_walk as procedural_walk
-from jcrowd.walker import walker_skeleton as walker_skeleton
+from jcrowd.motion.clip import Clip, drop_tpose_frames
 
-__all__ = [
-    "LABEL_COLUMNS",
-    "STANCE_FRACTION",
-    "Clip",
-    "WalkTruth",
-    "load_dataset",
-    "procedural_walk",
-    "walker_skeleton",
-]
+__all__ = ["LABEL_COLUMNS", "load_dataset"]
 
 LABEL_COLUMNS = ("file", "actor", "style", "repetition")
 """Columns a labels file must have (more are allowed and ignored)."""
@@ -49,25 +38,6 @@ LABEL_COLUMNS = ("file", "actor", "style", "repetition")
 class _Labels:
     """The labels of one clip; ``None`` where unknown."""
 
-    actor: str | None = None
-    style: str | None = None
-    repetition: int | None = None
-
-
-@dataclass(frozen=True)
-class Clip:
-    """One clip of a dataset.
-
-    Attributes:
-        path: the BVH file it was read from.
-        motion: the clip in metres, leading T-pose frames already dropped.
-        dropped_frames: how many leading frames were dropped.
-        actor, style, repetition: labels from the labels file, ``None`` where unknown.
-    """
-
-    path: str
-    motion: Motion
-    dropped_frames: int
     actor: str | None = None
     style: str | None = None
     repetition: int | None = None

@@ -38,7 +38,7 @@ def demo_scenario_path() -> Path:
 
 
 def load_default_model() -> Any:
-    """The shipped :class:`~jcrowd.model.MotionModel` (no data folder needed)."""
+    """The shipped :class:`~jcrowd.model.motion_model.MotionModel` (no data folder needed)."""
     from jcrowd.io.model_file import load_motion_model
 
     return load_motion_model(default_model_path())[0]

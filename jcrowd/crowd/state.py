@@ -1,4 +1,4 @@
-"""The crowd's state and the frame a step returns (:mod:`jcrowd.crowd` advances them).
+"""The crowd's state and the frame a step returns (:mod:`jcrowd.crowd.stepping` advances them).
 
 :class:`CrowdState` holds every agent's state with the agent axis leading (so one
 ``PartitionSpec("agents")`` shards all of it); :class:`Frame` is what a renderer or a recorder
@@ -13,8 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.clips import CrowdModel, next_clips
-from jcrowd.synthesis import clip_core
+from jcrowd.crowd.clips import CrowdModel, next_clips
+from jcrowd.crowd.synthesis import clip_core
 
 __all__ = ["CrowdState", "Frame", "init_state", "refresh_far_cores"]
 
@@ -51,8 +51,8 @@ class CrowdState(eqx.Module):
     num_waypoints: Int[Array, " N"]
     loop: Bool[Array, " N"]
     waypoint: Int[Array, " N"]  # index of the waypoint being walked to
-    # Devices whose blocks hold the agents interleaved (jcrowd.simulate.shard_state): with K > 1
-    # position p of every array is agent agent_order(N, K)[p], not agent p.
+    # Devices whose blocks hold the agents interleaved (jcrowd.crowd.simulate.shard_state): with K
+    # > 1 position p of every array is agent agent_order(N, K)[p], not agent p.
     interleave: int = eqx.field(static=True, default=1)
 
     @property

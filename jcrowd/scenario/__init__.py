@@ -1,0 +1,28 @@
+"""Scenarios: the TOML schema and its checks, polygon geometry, spawning.
+
+A scenario is a TOML file (keys documented in ``examples/README.md``): :func:`load_scenario`
+reads and checks it into a :class:`Scenario` (errors name the file and the key path),
+:func:`spawn` places its agents. The modules import in one direction: ``check`` and
+``geometry`` → ``schema`` → ``parse`` and ``spawning``.
+"""
+
+from jcrowd.scenario.geometry import MIN_POLYGON_AREA_M2 as MIN_POLYGON_AREA_M2
+from jcrowd.scenario.geometry import polygon_area as polygon_area
+from jcrowd.scenario.geometry import polygon_contains as polygon_contains
+from jcrowd.scenario.geometry import polygon_problem as polygon_problem
+from jcrowd.scenario.geometry import sample_triangles as sample_triangles
+from jcrowd.scenario.geometry import triangulate as triangulate
+from jcrowd.scenario.parse import load_scenario as load_scenario
+from jcrowd.scenario.parse import parse_scenario as parse_scenario
+from jcrowd.scenario.schema import DEFAULT_THRESHOLDS_M as DEFAULT_THRESHOLDS_M
+from jcrowd.scenario.schema import Camera as Camera
+from jcrowd.scenario.schema import CameraKey as CameraKey
+from jcrowd.scenario.schema import Group as Group
+from jcrowd.scenario.schema import LodSettings as LodSettings
+from jcrowd.scenario.schema import Path as Path
+from jcrowd.scenario.schema import Region as Region
+from jcrowd.scenario.schema import Scenario as Scenario
+from jcrowd.scenario.schema import camera_at as camera_at
+from jcrowd.scenario.spawning import LATERAL_JITTER_M as LATERAL_JITTER_M
+from jcrowd.scenario.spawning import Spawn as Spawn
+from jcrowd.scenario.spawning import spawn as spawn
