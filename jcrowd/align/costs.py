@@ -17,11 +17,11 @@
 multiscale DTW, in blocks of rows over the columns they span, so the work follows the window,
 not ``N·M``); both are matrix products.
 
-Euclidean costs use ``|a|² + |b|² − 2⟨a, b⟩`` (a BLAS product, ~6× faster than forming
-every difference) after centring both sequences on their common mean, and then recompute from
-explicit differences every cell whose ``d²`` is below ``10⁻³ (|a|² + |b|²)``. The rounding error
-of the expansion is at most about ``(D + 2) ε (|a|² + |b|²)``, so every cell keeps a relative
-error below ``(D + 2) ε / 10⁻³`` (2·10⁻¹¹ for 93 dims), and equal frames still cost exactly 0.
+Euclidean costs use ``|a|² + |b|² − 2⟨a, b⟩`` (a BLAS product, so no ``(rows, columns, D)`` array of
+differences is formed) after centring both sequences on their common mean, and then recompute from
+explicit differences every cell whose ``d²`` is below ``10⁻³ (|a|² + |b|²)``. The rounding error of
+the expansion is at most about ``(D + 2) ε (|a|² + |b|²)``, so every cell keeps a relative error
+below ``(D + 2) ε / 10⁻³`` (2·10⁻¹¹ for 93 dims), and equal frames still cost exactly 0.
 """
 
 from __future__ import annotations

@@ -85,10 +85,10 @@ def multiscale_dtw(
         features_b: ``(M, D)`` features of B.
         metric: local cost, as for :func:`~jcrowd.align.dtw.dtw`.
         radius: search radius (cells) around the projected path at each finer level. The
-            default 12 kept the cost within 0.6 % of exact in every case ``bench/dtw.py`` and
-            the tests try. Smaller is faster but can lock onto a worse path where many are
-            almost equally good: on 3000-frame concatenations of unrelated walks radius 4 came
-            out 4 % (pose) and 26 % (physics) above exact, radius 8 2 % and 5 %.
+            default 12 keeps the cost close to exact in every case the tests and
+            ``bench/dtw.py`` (its ``cost_ratio``) try. Smaller is faster but can lock onto a
+            worse path where many are almost equally good, as on concatenations of unrelated
+            walks (``bench/dtw.py --sequences clips``), with physics features most of all.
         min_length: the coarsest level keeps the shorter sequence at least this long; a pair
             shorter than ``2·min_length`` gets exact DTW.
         max_levels: at most this many levels, the finest included (paper 004 uses six: from

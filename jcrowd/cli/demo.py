@@ -1,11 +1,11 @@
 """``jcrowd demo [--out-dir out]``: the shipped model walks the shipped plaza; MP4 + PNG.
 
-Runs the plaza scenario shipped in the package (a copy of ``examples/plaza.toml``: 3000 walkers
-in five groups, paths with 90° corners) with the shipped default model, renders it headless
-with agents coloured by LOD level, and writes ``OUT/demo.mp4`` and ``OUT/demo.png`` (the middle
-frame). Defaults keep it within about a minute on a 2-core machine without a GPU: 10 seconds of
-scenario time at 960×540. Prints both paths (``--json``: one object with ``mp4``, ``png``,
-``frames``, ``agents``, ``ms_per_frame_median``, ``ms_per_step_median``, ``seconds``).
+Runs the plaza scenario shipped in the package (a copy of ``examples/plaza.toml``: 3000 walkers in
+five groups, paths with 90° corners) with the shipped default model, renders it headless with agents
+coloured by LOD level, and writes ``OUT/demo.mp4`` and ``OUT/demo.png`` (the middle frame). Defaults
+are sized for a small machine without a GPU: 10 seconds of scenario time at 960×540. Prints both
+paths (``--json``: one object with ``mp4``, ``png``, ``frames``, ``agents``,
+``ms_per_frame_median``, ``ms_per_step_median``, ``seconds``).
 """
 
 from __future__ import annotations

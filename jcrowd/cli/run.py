@@ -97,8 +97,8 @@ def use_cpu_devices(count: int) -> None:
 
     The crowd step runs one device's share of the agents per device
     (:func:`jcrowd.crowd.simulate.Simulation.compiled`); on CPU, XLA runs one step's kernels nearly
-    one after the other, so a second device is what puts a second core to work (100k-agent
-    plaza on 2 cores: ~12 ms on one device, 8.6–9.7 ms on two; bench/RESULTS.md).
+    one after the other, so a second device is what puts a second core to work
+    (``bench/step.py --cpu-devices K`` times the step on K devices).
     """
     from jcrowd.errors import JcrowdError
 

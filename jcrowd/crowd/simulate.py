@@ -55,9 +55,9 @@ def step_compiler_options() -> dict[str, Any]:
 
     Without it XLA:CPU copies every donated state buffer the step updates before writing it
     (10 fields, e.g. ``copy(%state_heading)`` in the compiled HLO), because the buffer has other
-    readers it cannot order; with it those copies go and results are unchanged (the test suite
-    runs with it). Measured on the 1M-agent bench plaza: 84–88 → 74–75 ms per step. An XLA or
-    a JAX without the option (``No such compile option``, or no ``compiler_options`` argument)
+    readers it cannot order, so every step moves those fields through memory twice; with it
+    those copies go and results are unchanged (the test suite runs with it). An XLA or a JAX
+    without the option (``No such compile option``, or no ``compiler_options`` argument)
     compiles without it; found once per process by compiling a one-element function.
     """
     if jax.default_backend() != "cpu":
@@ -156,9 +156,9 @@ def on_all_devices(tree: Any) -> Any:
     """``tree`` replicated on every device of a one-process multi-device run (unchanged on one
     device, and with several processes, where JAX places the replicated inputs itself).
 
-    The split step takes the camera and ``dt`` replicated; arrays left on one device were copied
-    to the others by JAX's slow argument path at every call: 0.5 ms of a 2.8 ms step at 2k
-    agents on two CPU devices (measured with the view and ``dt`` placed once instead).
+    The split step takes the camera and ``dt`` replicated; arrays left on one device are copied
+    to the others by JAX's slow argument path at every call, a fixed cost per step that weighs
+    most in small crowds. Placing them once removes it.
     """
     if len(jax.devices()) == 1 or jax.process_count() > 1:
         return tree
@@ -184,9 +184,8 @@ def agent_order(agents: int, devices: int) -> np.ndarray:
 
     Interleaved rather than contiguous because the LOD budget is per device
     (:func:`per_device_config`) and scenarios spawn group by group: with contiguous blocks a
-    group near the camera sat in one device's block and overflowed its share of the near levels
-    while the other device's went unused (``examples/plaza.toml`` on two devices: 27 agents at
-    level 0 instead of 43).
+    group near the camera would sit in one device's block and overflow its share of the near
+    levels while the other device's share went unused.
     """
     check_divisible(agents, devices)
     per = agents // devices
@@ -245,9 +244,10 @@ def _per_device_step(crowd: CrowdModel, config: StepConfig, devices: list[Any]) 
     other (agent ids; each block's valid slots lead within it).
 
     Why not one global program partitioned by XLA: the step's compactions (``nonzero``,
-    ``top_k``, scatters over the agent axis) then need the whole axis on every device; on
-    2 CPU devices the 100k plaza took 379 ms per step that way against 12.5 ms on one device,
-    and 8.6–9.7 ms split like this (2 cores; bench/RESULTS.md).
+    ``top_k``, scatters over the agent axis) then need the whole axis on every device, so
+    every compaction moves the axis between devices and the partitioned step is slower than
+    the same step on one device; split like this, each device compacts only its own block
+    (``bench/step.py --cpu-devices K`` times the split step).
     """
     from jax import shard_map
     from jax.sharding import PartitionSpec as P

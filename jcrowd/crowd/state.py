@@ -24,7 +24,7 @@ class CrowdState(eqx.Module):
 
     # Per-agent scalars are kept as separate (N,) arrays, not (N, 2) or (N, 3) rows: XLA:CPU
     # vectorizes a loop over one contiguous axis, and a fusion writing an (N, 2) result
-    # evaluated its whole expression once per column (dead reckoning: 15 ms of a 1M-agent step).
+    # evaluates its whole expression once per column (dead reckoning would be computed twice).
     x: Float[Array, " N"]  # root position, m
     z: Float[Array, " N"]
     heading: Float[Array, " N"]  # rad; faces (sin, 0, cos)
@@ -71,7 +71,7 @@ class CrowdState(eqx.Module):
 
     def clip(self, which: str = "current") -> tuple[Array, Array, Array]:
         """``(control (N, d), mix (N, A), duration (N,))`` of the current or the next clip."""
-        # A select, not a gather: XLA:CPU vectorizes it (the gather cost 5x more at 1M agents).
+        # A select, not a gather: XLA:CPU vectorizes the select, not the gather.
         first = (self.current == 0) if which == "current" else (self.current == 1)
         return (
             jnp.where(first[:, None], self.control[:, 0], self.control[:, 1]),
@@ -107,9 +107,9 @@ def init_state(
 
     Phases are uniform over the whole cycle, and agents already past its middle get their next
     clip here, as the step would have given it: the step then sees cycle ends at their steady
-    rate from the first frame. (Phases drawn from the first half only made every agent need a
-    choice within the first half cycle — 2x the steady rate — and left a backlog of ~20,000
-    deferred choices three seconds into a 100k-agent run.)
+    rate from the first frame. (Phases drawn from the first half only would make every agent
+    need a choice within the first half cycle — twice the steady rate — beyond the per-step
+    ``refresh`` budget, and leave a backlog of deferred choices.)
 
     ``spawn`` holds ``position (N, 2)``, ``heading``, ``height``, ``speed`` ``(N,)``,
     ``waypoints (N, K, 2)``, ``num_waypoints (N,)``, ``loop (N,)``.
@@ -175,15 +175,15 @@ def refresh_far_cores(
 ) -> CrowdState:
     """Compute the coarsest-level core of each agent in the bucket whose cached one is stale.
 
-    Stale: never computed, or the agent's clip changed since (the hand-over clears
-    ``far_valid``). The issue's design — keep the clip, recompute its core only when the clip
-    changes — for the level holding most synthesized agents (~13,000 of them on the bench
-    plaza, whose 77 × 49 core product per agent-frame cost 1.2 ms of a 100k step). Usually few
-    are stale per step (an agent changes clip once per cycle), so at most an eighth of the
-    bucket + 16 is compacted and computed; when more are (the first step, a camera cut) the
-    whole bucket is — one branch runs, and either way every agent of the bucket leaves valid.
-    The scatter into the ``(N, R)`` cache stays outside the branch so the cache is updated in
-    place. Interleaved runs: 100k 16.6–17.0 → 16.0–16.1 ms, 1M 91–95 → 85–88 ms.
+    Stale: never computed, or the agent's clip changed since (the hand-over clears ``far_valid``).
+    The issue's design — keep the clip, recompute its core only when the clip changes — for the
+    level holding most synthesized agents (the coarsest; see
+    :func:`jcrowd.crowd.stepping.default_capacities`), whose ``A × R_P R_T`` core product would
+    otherwise run for each of them every step. Usually few are stale per step (an agent changes clip
+    once per cycle), so at most an eighth of the bucket + 16 is compacted and computed; when more
+    are (the first step, a camera cut) the whole bucket is — one branch runs, and either way every
+    agent of the bucket leaves valid. The scatter into the ``(N, R)`` cache stays outside the branch
+    so the cache is updated in place.
     """
     lv = cm.decoders.levels[-1]
     n, cap = state.num_agents, safe.shape[0]

@@ -142,11 +142,12 @@ def default_capacities(agents: int, levels: int) -> tuple[int, ...]:
     """The default budget: level l < L − 1 holds ``min(N / 2^(L − l) + 64, 256 · 2^l)``
     agents, the last ``min(N, 16,384)``.
 
-    A share of a small crowd, a fixed budget for a large one: the screen holds only so many
-    agents tall enough to show detail, and every slot costs a decode whether used or not.
-    Measured on the 1280×720 bench plaza (1 agent per 10 m²), at most ~300 agents sit at each
-    of the levels 0–4 and ~13,000 at level 5 with 3-pixel detail culling, at 100k and at 1M
-    agents alike. Dense scenes close to the camera overflow coarser (counted), never vanish.
+    A share of a small crowd, a fixed budget for a large one: the screen holds only so many agents
+    tall enough to show detail, and every slot costs a decode whether used or not. On
+    ``bench/step.py``'s plaza (1280×720, 1 agent per 10 m², 3-pixel detail culling) a few hundred
+    agents sit at each of the levels 0–4 and most synthesized ones at level 5, at 100k and at 1M
+    agents alike (its level histogram shows it). Dense scenes close to the camera overflow coarser
+    (counted), never vanish.
     """
     caps = [
         min(agents // 2 ** (levels - lv) + 64, BUDGET_FINEST * 2**lv) for lv in range(levels - 1)
@@ -216,12 +217,10 @@ chunks smaller than ``StepConfig.chunk``."""
 
 def bucket_chunk(capacity: int, chunk: int, core_floats: int = 0) -> int:
     """Chunk size for a bucket of ``capacity`` slots: at least ``chunk``, at most 8 chunks (every
-    chunk pays each of its ops' dispatch once — ~2,600 ops per step at 100k on XLA:CPU — so a
-    big level takes bigger chunks), but no chunk whose ``core_floats``-float cores pass
-    :data:`CHUNK_CORE_FLOATS`. That caps level 0 (1,200-float cores) at 2,184 slots. Full
-    detail over 100k agents on 2 devices (agent-frames/s, three interleaved runs each): chunks
-    of 6,250 slots (no cap) 9.0–9.7 × 10⁵, 4,096 8.3–9.1, 2,048 9.9–10.0, 1,536 9.7–10.0, 1,024
-    9.5–9.9, 873 (the cap before the cores were factored) 8.8–9.1 × 10⁵.
+    chunk pays each of its ops' dispatch once on XLA:CPU, so a big level takes bigger chunks),
+    but no chunk whose ``core_floats``-float cores pass :data:`CHUNK_CORE_FLOATS`. That caps
+    level 0 (1,200-float cores) at 2,184 slots: larger level-0 chunks decode fewer agent-frames
+    per second, not more (``bench/step.py``'s full-detail rate decodes in these chunks).
     """
     size = max(chunk, -(-capacity // 8))
     if core_floats > 0:
@@ -238,9 +237,10 @@ def decode_bucket(
     function); ``used`` is how many leading slots hold agents (buckets are filled from the
     front, :class:`jcrowd.crowd.lod.Buckets`). The first ``ceil(used / chunk)`` chunks run in a loop
     with a traced trip count — the shapes stay static, so a changing level histogram compiles
-    nothing — and the rows of chunks not run are zero (their slots are not valid). Measured at
-    100k agents on the bench plaza: levels 1–4 hold ~60–250 agents of their 512–4,096 slots,
-    and decoding every slot cost ~4.6 ms of the step's 17.4.
+    nothing — and the rows of chunks not run are zero (their slots are not valid). A capacity
+    is a bound, not the usual load: on ``bench/step.py``'s plaza levels 1–4 fill a small part of
+    their 512–4,096 slots (its level histogram), so decoding every slot would mostly decode
+    padding.
     """
     cap = slots.shape[0]
     if cap <= chunk:

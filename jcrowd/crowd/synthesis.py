@@ -9,12 +9,12 @@ the residual cores and the trend planes (000 Eq. 8), and the pose vector at alig
 
 Per agent-frame: ``K(c) = a V`` (``A × R_P R_T``; under ``vmap`` one GEMM for a whole bucket;
 ``V`` is stored as two factors of its rank, :func:`_factor_cores`), ``w_T(τ)`` from two rows of
-``U_T``, ``g = K w_T`` and ``y = U_P g``. No per-agent core is kept between steps (a full-level
-core per agent at 100k agents would be 480 MB, DESIGN §5; and decoding from cached cores was
-no faster in the step's chunks: 32k level-0 agents on two devices 34.8 ms vs 35.6 ms computing
-them, the cores read from memory at ~9 GB/s). Measured on this 2-core CPU at 100k agents,
-level 5: 10 ms this way vs 161 ms for gathering two rows of a precomputed ``V U_Tᵀ`` table per
-agent (XLA's CPU gather materialises every row).
+``U_T``, ``g = K w_T`` and ``y = U_P g``. Finer levels keep no per-agent core between steps (a
+full-level core per agent at 100k agents would be 480 MB, DESIGN §5, and reading cores back
+from memory is no cheaper in the step's chunks than computing them); only the coarsest level's
+small core is kept while a clip plays (:func:`jcrowd.crowd.state.refresh_far_cores`). Nor is a
+precomputed ``V U_Tᵀ`` table read per agent: that takes a gather of two of its rows per agent,
+and XLA's CPU gather materialises every row.
 
 Forward kinematics runs on the level's *kept* joints only: a dropped joint keeps its reference
 rotation, so the chain from a kept joint's nearest kept ancestor is a constant rotation and
@@ -340,16 +340,16 @@ def _place_points(
 
     When the kept joints are the leading points (level 0: every joint kept, only the End Sites
     placed) they are copied rather than multiplied by a zero offset, and only the placed points'
-    anchors get a rotation matrix: the placement fusion over all ``(J + E) × 3`` outputs had been
-    the level-0 decode's largest kernel on XLA:CPU (16k agents: points 10.4 → 8.0 ms).
+    anchors get a rotation matrix: placing all ``(J + E) × 3`` outputs would spend most of the
+    level-0 placement on multiplying kept joints by a zero offset.
     """
     anchor = np.asarray(level.anchor)
     direct = np.asarray(level.direct) if level.direct else np.full(anchor.shape, -1)
     kept_first = np.concatenate([np.flatnonzero(direct >= 0), np.flatnonzero(direct < 0)])
     if not np.array_equal(kept_first, np.arange(direct.size)):
         # The kept joints are not the leading points (coarse levels): putting the points back
-        # in order cost more than the zero-offset products saved (16k agents: level 5 1.6 →
-        # 2.6 ms, level 2 7.7 → 9.2 ms), so every point is placed.
+        # in order (a permutation of the point axis) costs more than the zero-offset products
+        # it saves, so every point is placed.
         direct = np.full(anchor.shape, -1)
     d_idx, e_idx = np.flatnonzero(direct >= 0), np.flatnonzero(direct < 0)
     parts = []
@@ -357,8 +357,9 @@ def _place_points(
         src = direct[d_idx]
         parts.append(pos if np.array_equal(src, np.arange(pos.shape[0])) else pos[src])
     if e_idx.size:
-        # One matrix per distinct anchor, then three broadcast multiply-adds: 2x faster on
-        # XLA:CPU than a quaternion rotation per point (measured at 100k agents, level 5).
+        # One matrix per distinct anchor, then three broadcast multiply-adds: the matrix is
+        # built once for every point sharing the anchor, where a quaternion rotation per point
+        # would redo the quaternion products for each of them.
         uniq, inv = np.unique(anchor[e_idx], return_inverse=True)
         whole = np.array_equal(uniq, np.arange(rot.shape[0]))
         m = quat_to_matrix(rot if whole else rot[uniq])[inv]

@@ -16,9 +16,9 @@ both leak equally into all three methods, so the comparison stays fair. RBF and 
 the same normalised controls as kriging. Every method is asked at the left-out controls clamped
 to the training samples' range, control by control, as the model and the crowd ask
 (:func:`jcrowd.model.motion_model.clamp_controls`): on ``cmu/walk`` the backward/sideways take
-``09_12`` lies outside the straight walks' range, and unclamped its linear trend extrapolated to
-16.9 cm mean error (nearest sample 9.8 cm), which alone put kriging behind nearest (6.27 vs 5.29 cm
-over all folds); clamped, kriging 4.44, RBF 4.69, nearest 5.29 cm.
+``09_12`` lies outside the straight walks' range, and unclamped, its linear trend extrapolates
+far enough to put kriging behind nearest sample over all folds (``bench/repro_001.py`` reports
+the error with and without clamping).
 """
 
 from __future__ import annotations
@@ -200,10 +200,9 @@ def evaluate_captures(
     The prediction is what jcrowd delivers: with ``foot_lock`` (the default, as in the crowd
     step and ``jcrowd export``) planted feet are locked (:func:`jcrowd.motion.footlock.lock_feet`).
     Why the raw decode slides: the time mode keeps ``R_T`` = 30 of 100 aligned frames, which
-    smooths the heel strike — measured on four ``cmu/walk`` samples, projecting only their time
-    mode onto 30 components raises skate from 0.16 (the capture) to 0.58 cm per frame, and it
-    takes 70 components to get back to 0.20; locking costs a few flops per agent-frame instead
-    of a 2.3× larger core.
+    smooths the heel strike, and a time mode wide enough to keep it would make every core
+    several times larger; locking costs a few flops per agent-frame instead
+    (``bench/kriging.py`` reports skate before and after locking beside the captures').
     """
     from jcrowd.align import align_to_reference, pose_features
 

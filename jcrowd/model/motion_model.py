@@ -15,12 +15,11 @@ A synthesized clip is the reference skeleton scaled to ``height``. :func:`synthe
 pure; fitting runs NumPy/JAX on arrays.
 
 Queries outside the sampled control range are clamped to it, control by control
-(:func:`clamp_controls`), before kriging: the hyperplane trend ``K_m(c)`` is a least-squares
-fit *inside* the samples, and extrapolating it is unreliable (measured on ``cmu/walk``: the
-backward/sideways take ``09_12`` left out lies outside the straight walks' range, and its
-unclamped predictions missed by 16.9 cm on average, clamped ones by 9.3 cm). The crowd step
-clamps the same way. The reliability ρ is still reported at the requested controls, so a caller
-sees how far out it asked.
+(:func:`clamp_controls`), before kriging: the hyperplane trend ``K_m(c)`` is a least-squares fit
+*inside* the samples, and extrapolating it is unreliable (on ``cmu/walk`` the backward/sideways take
+``09_12`` left out lies outside the straight walks' range; ``bench/repro_001.py`` reports the
+leave-one-clip-out error with and without clamping). The crowd step clamps the same way. The
+reliability ρ is still reported at the requested controls, so a caller sees how far out it asked.
 """
 
 from __future__ import annotations
@@ -214,7 +213,7 @@ def synthesize_clip(
     Starts above the origin facing +Z; the skeleton is the reference scaled to ``height``
     (default: the control named ``height`` if kriged, else the model's default height).
     ``lock_feet`` applies :func:`jcrowd.motion.footlock.lock_feet` (planted feet stop sliding; the
-    root's path shifts by a few cm per cycle, measured 6 cm on average on ``cmu16``).
+    root's path shifts by a few cm per cycle).
     Controls outside the model's range are clamped to it (module doc); ``method`` picks kriging
     or a baseline (:func:`level_cores`).
     """

@@ -62,9 +62,9 @@ class TensorModelConfig:
         max_ranks, min_ranks: ``(R_P, R_T, R_S)`` of the finest and coarsest key levels.
             ``None``: ``(max(40, P/2), 30, 0.8·S)`` and 7×7×9, capped at the tensor's size.
             Paper 000 §5.1 used 40×40×60 for 186 samples of one gait class; the shared CMU
-            walks are more varied (curved, backward and sideways steps), and measured on them
-            the sample mode needs more rank (40×40×60 leaves 1.5 cm mean joint error on
-            ``cmu/walk``, 49×30×78 0.6 cm) while a 100-frame cycle's time mode needs less.
+            walks are more varied (curved, backward and sideways steps), so the sample mode
+            needs more rank, while a 100-frame cycle's time mode needs less
+            (``bench/tensor.py`` reports each key level's joint error).
         dtw: ``"multiscale"`` or ``"exact"``.
     """
 

@@ -96,8 +96,8 @@ def capsule_detail(level: int) -> tuple[int, int]:
     ``segments`` vertices around the bone, ``rings`` latitude rings per cap. LOD levels are
     ordered from near to far, so deeper levels (smaller on screen) get fewer triangles: 64 per
     bone at level 0, 48 at level 1, 24 at level 2 and 16 from level 3 on. Software rasterisers
-    spend their time in proportion (bench/render.py; 144 triangles per bone made a frame ~2.5×
-    slower on llvmpipe with no visible gain at crowd scale).
+    spend their time in proportion to triangles, and finer capsules show nothing more at crowd
+    scale (``bench/render.py --detail`` times a frame at another tessellation).
     """
     return ((8, 2), (6, 2), (6, 1))[level] if level < 3 else (4, 1)
 

@@ -13,7 +13,7 @@ starting from each joint's captured global rotation ``G°``:
 
 One rigid rotation per joint cannot follow a change of the angles *between* sibling bones, which
 the position problem allows, so a level's FK can differ from the optimised positions below
-joints with several kept children (up to ~2 cm on CMU walks); below single-child joints the
+joints with several kept children; below single-child joints the
 direction is matched exactly.
 """
 

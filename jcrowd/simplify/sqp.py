@@ -11,8 +11,8 @@ sum of squares ``f = ‖r(x)‖²`` (all of paper 003's terms are), and ``H`` is
 Hessian ``2 JᵣᵀJᵣ`` plus the constraints' curvature weighted by ``|λ|`` (λ from the previous
 subproblem) plus a small ridge. That ``H`` is positive definite, so every subproblem has a
 unique minimiser and its step is a descent direction for the merit function; the exact
-Lagrangian Hessian was tried first and is indefinite when many frozen joints' angle terms are
-far from their key values, which made the coarsest levels diverge. The step is accepted by
+Lagrangian Hessian is indefinite when many frozen joints' angle terms are far from their key
+values, and the coarsest levels then diverge. The step is accepted by
 backtracking on the ℓ1 merit function ``f + ρ‖c‖₁`` over four step sizes (1, ½, ¼, ⅛),
 evaluated together so the loop stays branch-free under ``vmap``. With no constraints it is a
 damped Gauss–Newton method.

@@ -162,10 +162,11 @@ def _check_tensor(X: Array) -> Array:
 def _leading_left_singular_vectors(A: Array, r: int) -> Array:
     """The ``r`` leading left singular vectors of ``A``, signs fixed.
 
-    With up to a few hundred rows (every unfolding of a motion tensor) it takes the
-    eigenvectors of the Gram matrix ``A Aᵀ``: 40× faster than an SVD that also forms the right
-    vectors, and it only loses directions with σ² below eps·σ₁², which carry no energy worth
-    keeping. A long mode (Data Mode, 004 §2.1) takes the SVD, full when ``r > min(A.shape)``.
+    With up to a few hundred rows (every unfolding of a motion tensor) it takes the eigenvectors of
+    the small Gram matrix ``A Aᵀ``, where an SVD would also form the right vectors (one per row,
+    each as long as a row), and it only loses directions with σ² below eps·σ₁², which carry no
+    energy worth keeping. A long mode (Data Mode, 004 §2.1) takes the SVD, full when
+    ``r > min(A.shape)``.
     """
     if A.shape[0] <= max(A.shape[1], 512):
         U = np.linalg.eigh(A @ A.T)[1][:, ::-1][:, :r]
