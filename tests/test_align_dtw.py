@@ -175,6 +175,55 @@ def test_downsample_and_projection_give_a_connected_window() -> None:
                     assert lo[fi] <= min(2 * j, 19) and hi[fi] >= min(2 * j + 1, 19)
 
 
+def _dilated_window(coarse: np.ndarray, n: int, m: int, radius: int) -> np.ndarray:
+    """The module docstring's window as a boolean (n, m) mask, by brute force.
+
+    Mark every fine cell under a coarse path cell (coarse ``(i, j)`` covers fine rows ``2i, 2i+1``
+    and columns ``2j, 2j+1``, clipped to the matrix), then mark every cell within ``radius``
+    rows AND ``radius`` columns of a marked one (a square dilation), clipped to the matrix.
+    """
+    covered = np.zeros((n, m), bool)
+    for i, j in coarse:
+        for fi in (2 * i, 2 * i + 1):
+            for fj in (2 * j, 2 * j + 1):
+                covered[min(fi, n - 1), min(fj, m - 1)] = True
+    window = np.zeros((n, m), bool)
+    for fi, fj in zip(*np.nonzero(covered), strict=True):
+        window[
+            max(fi - radius, 0) : min(fi + radius, n - 1) + 1,
+            max(fj - radius, 0) : min(fj + radius, m - 1) + 1,
+        ] = True
+    return window
+
+
+def test_projected_window_is_widened_by_radius_on_both_sides() -> None:
+    """``project_path``'s per-row ``[lo, hi]`` equals the docstring's window exactly: the fine
+    cells under the coarse path, widened by ``radius`` rows and ``radius`` columns on EACH side
+    (a brute-force dilation as oracle). Guards against dropping the column radius on one side
+    (``lo`` or ``hi`` not widened), which the coverage-only test above does not see."""
+    rng = np.random.default_rng(11)
+    # A random-walk pair (a slanted, uneven coarse path) and a hand-made staircase; the shapes
+    # are odd so the last coarse row/column covers a single fine one, and wide enough that most
+    # rows are not clipped at either edge (else a missing radius would be hidden by the clip).
+    a, b = np.cumsum(rng.normal(size=(61, 2)), 0), np.cumsum(rng.normal(size=(47, 2)), 0)
+    walk = dtw(downsample_pairs(a), downsample_pairs(b)).path
+    stairs = np.array([(0, 0), (1, 1), (1, 2), (1, 3), (2, 4), (3, 4), (4, 4), (5, 5)])
+    stairs = np.concatenate([stairs, np.stack([np.arange(6, 20), np.arange(6, 20)], 1)])
+    for coarse, n, m in ((walk, 61, 47), (stairs, 39, 40)):
+        for radius in (0, 1, 2, 5):
+            want = _dilated_window(coarse, n, m, radius)
+            lo, hi = project_path(coarse, n, m, radius)
+            cols = np.arange(m)
+            got = (cols[None, :] >= lo[:, None]) & (cols[None, :] <= hi[:, None])
+            # The test can only catch a one-sided widening if the window is not clipped away:
+            # some row's window must start after column 0 and some end before column m - 1.
+            assert (~want[:, 0]).any() and (~want[:, -1]).any()
+            for r in range(n):  # Integer windows: exact equality, row by row for a clear message.
+                want_lo, want_hi = np.flatnonzero(want[r])[[0, -1]]
+                assert (lo[r], hi[r]) == (want_lo, want_hi), (n, m, radius, r)
+            np.testing.assert_array_equal(got, want)  # the oracle's rows are intervals too
+
+
 def test_multiscale_is_exact_when_short_or_unconstrained() -> None:
     rng = np.random.default_rng(2)
     a = np.cumsum(rng.normal(size=(200, 3)), axis=0)

@@ -150,3 +150,81 @@ def test_screen_height_closed_form():
     """A 1.8 m character 10 m ahead with a 60° vertical fov: 1.8 / (2·10·tan 30°) · 720 px."""
     px = screen_height_px(_view(), jnp.asarray([[0.0, 0.0, 10.0]]), jnp.asarray([1.8]))
     assert float(px[0]) == pytest.approx(1.8 / (2 * 10 * np.tan(np.pi / 6)) * 720, rel=1e-5)
+
+
+def _frustum_planes(eye, target, fov_deg, aspect):
+    """Outward unit normals of the left, right, bottom and top planes (all through the eye), in
+    NumPy from the camera geometry: each normal is the cross product of the two corner rays on
+    that side of the image, normalized, and turned away from the view direction."""
+    eye, target = np.asarray(eye, np.float64), np.asarray(target, np.float64)
+    fwd = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(fwd, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    half_h = np.tan(np.deg2rad(fov_deg) / 2)  # image half-height at unit depth
+    half_w = half_h * aspect
+    corner = {
+        (sx, sy): fwd + sx * half_w * right + sy * half_h * up for sx in (-1, 1) for sy in (-1, 1)
+    }
+    normals = []
+    for c1, c2 in (
+        ((-1, -1), (-1, 1)),  # left
+        ((1, -1), (1, 1)),  # right
+        ((-1, -1), (1, -1)),  # bottom
+        ((-1, 1), (1, 1)),  # top
+    ):
+        nrm = np.cross(corner[c1], corner[c2])
+        nrm /= np.linalg.norm(nrm)
+        normals.append(nrm if nrm @ fwd < 0 else -nrm)  # outward: away from the view axis
+    return eye, fwd, right, up, np.array(normals)
+
+
+def test_frustum_sphere_test_against_plane_distances():
+    """Spheres at ±(radius − ε) and ±(radius + ε) from each side plane, from the near plane
+    (through the eye) and from the far plane, against perpendicular plane distances computed
+    in NumPy from eye, target, fov and aspect. A wide fov makes the side planes' normals far
+    from the camera's right/up axes, so a side-plane distance not divided by the normal's
+    length (|x| − depth·tan instead of (|x| − depth·tan)/√(1 + tan²)) culls spheres that
+    still touch the frustum."""
+    eye, target, fov, aspect, radius, far = [1.0, 2.5, -3.0], [4.0, 1.0, 9.0], 100.0, 1.6, 1.5, 80.0
+    view = CameraView(
+        eye=jnp.asarray(eye, jnp.float32),
+        target=jnp.asarray(target, jnp.float32),
+        fov_deg=jnp.asarray(fov, jnp.float32),
+        aspect=jnp.asarray(aspect, jnp.float32),
+        height_px=jnp.asarray(720.0, jnp.float32),
+    )
+    e, fwd, right, up, normals = _frustum_planes(eye, target, fov, aspect)
+    half_h = np.tan(np.deg2rad(fov) / 2)
+    # ε = 0.1 m: far above float32 rounding of these coordinates (~1e-5 m), and small enough
+    # that (radius − ε)·√(1 + tan²) > radius for every side plane here (tan ≥ 1.19), so the
+    # un-normalized distance misclassifies the +(radius − ε) spheres.
+    eps = 0.1
+    offsets = np.array([-(radius + eps), -(radius - eps), radius - eps, radius + eps])
+    points, expected = [], []
+    for k, nrm in enumerate(normals):
+        for depth in (4.0, 30.0):
+            # The middle of that side of the image at this depth: on the plane, far from the
+            # other three planes.
+            across = right if k < 2 else up
+            half = half_h * aspect if k < 2 else half_h
+            on_plane = e + depth * fwd + (1 if k % 2 else -1) * depth * half * across
+            assert abs((on_plane - e) @ nrm) < 1e-9  # it is on the plane
+            for off in offsets:
+                points.append(on_plane + off * nrm)
+                expected.append(off < radius)
+    axis = (-(radius + eps), -(radius - eps), radius - eps, far - eps, far + radius - eps)
+    for d in axis:
+        points.append(e + d * fwd)  # on the view axis: only the near/far planes matter
+        expected.append(d > -radius)
+    points.append(e + (far + radius + eps) * fwd)  # a sphere wholly beyond the far plane
+    expected.append(False)
+    pts = np.array(points)
+    # The oracle: a sphere touches the frustum (conservative plane test) iff its centre is less
+    # than radius outside every side plane, the near plane (through the eye) and the far plane.
+    dist_sides = (pts - e) @ normals.T
+    depth = (pts - e) @ fwd
+    oracle = (dist_sides < radius).all(1) & (depth > -radius) & (depth < far + radius)
+    np.testing.assert_array_equal(oracle, expected)  # the table is what it says
+    got = in_frustum(view, jnp.asarray(pts, jnp.float32), radius=radius, far=far)
+    np.testing.assert_array_equal(np.asarray(got), oracle)

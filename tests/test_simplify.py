@@ -54,7 +54,7 @@ from jcrowd.simplify import (
 )
 from jcrowd.simplify.analysis import elimination_order, key_posture
 from jcrowd.simplify.levels import plan_level, position_problem
-from jcrowd.simplify.pipeline import solve_positions
+from jcrowd.simplify.pipeline import _bone_curvature, _objective_and_constraints, solve_positions
 from jcrowd.simplify.sqp import sqp_solve
 
 # ------------------------------------------------------------------------------- small clip
@@ -230,6 +230,45 @@ def test_solve_positions_matches_scipy_slsqp(small: Motion, small_levels: dict, 
             # Newton step (the solver stops when |c| < 1e-5 m², then takes that step).
             np.testing.assert_allclose(lengths[rigid], pb.bone_lengths[rigid], rtol=1e-4)
             np.testing.assert_allclose(lengths[~rigid], 0.0, atol=1e-6)  # ties, float32 zero
+
+
+@pytest.mark.parametrize("level", _ORACLE_LEVELS)
+def test_bone_curvature_equals_autodiff_hessian(small: Motion, small_levels: dict, level):
+    """The SQP's closed-form ``Σ|λ_k| ∇²c_k`` (``_bone_curvature``) equals ``jax.hessian`` of
+    ``Σ|λ_k| c_k(x)`` over the hard-mode constraints, at random positions and multipliers (the
+    solver's default when no closed form is given). Guards against a wrong factor (the 2 of
+    ``∇²‖x_c − x_p‖² = 2 I``), a wrong incidence sign or a multiplier read from the wrong row."""
+    sk = small.skeleton
+    plan = plan_level(sk, small_levels["order"], level, small_levels["key"])
+    pb = position_problem(sk, plan, small_levels["key"])
+    _, constraints = _objective_and_constraints(pb, "hard", Weights())
+    curvature = _bone_curvature(pb)
+    rigid = int(np.count_nonzero(pb.bone_lengths > 1e-6))
+    m = rigid + 3 * (len(pb.bones) - rigid)  # as _solver sizes λ: rigid rows, then tie rows
+    b0 = jnp.asarray(pb.bone_lengths, jnp.float32)
+    params = (None, b0, jnp.asarray(pb.angle_cos, jnp.float32))
+    rng = np.random.default_rng(level)
+    for _ in range(3):
+        x_np = rng.normal(0.0, 0.5, 3 * (pb.num_joints - 1))
+        x = jnp.asarray(x_np, jnp.float32)
+        # The oracle differentiates the very constraints the SQP solves: they are the rows of
+        # the SLSQP oracle's NumPy constraints (same order, so λ_k pairs with the same bone).
+        np.testing.assert_allclose(
+            np.asarray(constraints(x, params), np.float64),
+            _np_constraints(x_np, pb),
+            rtol=1e-5,  # float32 squared lengths of ~1 m² vectors
+            atol=1e-5,
+        )
+        lam_abs = jnp.asarray(np.abs(rng.normal(0.0, 2.0, m)), jnp.float32)
+        closed = np.asarray(curvature(x, lam_abs), np.float64)
+        oracle = np.asarray(
+            jax.hessian(lambda y, lam=lam_abs: jnp.dot(lam, constraints(y, params)))(x),
+            np.float64,
+        )
+        assert closed.shape == oracle.shape == (x.size, x.size)
+        # The constraints are quadratic, so both are exact sums of a few ±2|λ_k| (entries up
+        # to ~20): float32 rounding of those sums, 1e-6 relative to the largest entry.
+        np.testing.assert_allclose(closed, oracle, rtol=0, atol=1e-6 * np.abs(oracle).max())
 
 
 # ------------------------------------------------------------- posture error and importance

@@ -208,6 +208,42 @@ def test_hooi_result_codes():
     assert zero.result is RESULT.CONVERGED and zero.error == 0.0
 
 
+def test_hooi_stopping_test_is_scale_free():
+    """X·1e3 and X·1e−3 take the same sweeps to the same factors (signs aside).
+
+    The stopping test is relative (e²_{k−1} − e²_k ≤ tol·e²_{k−1}, e² = ‖X − X̂‖²/‖X‖²), so
+    scaling X changes nothing. Guards against an absolute test, e.g. on the residual energy
+    ‖X − X̂‖² itself: then the large copy runs on (21 sweeps here) and the small one stops at 4.
+    """
+    X = low_rank_plus_noise((20, 25, 30), (6, 6, 6), 0.3, seed=7)
+    big, small = hooi(1e3 * X, (3, 4, 5)), hooi(1e-3 * X, (3, 4, 5))
+    assert big.iterations == small.iterations
+    assert big.iterations >= 5  # measured 10: several sweeps, so a misplaced stop shows
+    # Same sweeps on a scaled copy: only rounding differs (measured ~1e-15); EXACT leaves room
+    # for the 1/(singular-value gap) amplification of that rounding in the eigenvectors.
+    for U, V in zip(big.factors, small.factors, strict=True):
+        sign = np.sign(np.sum(U * V, axis=0))  # columns are unique up to sign
+        np.testing.assert_allclose(U, V * sign, rtol=0, atol=EXACT)
+    assert big.error == pytest.approx(small.error, rel=EXACT)
+
+
+def test_hooi_stops_at_the_first_sweep_below_the_relative_tolerance():
+    """HOOI stops after the first sweep k with e²_{k−1} − e²_k ≤ tol·e²_{k−1}, as documented.
+
+    Oracle: the same HOOI run for exactly j = 0, 1, … sweeps (``tol=0``, ``max_iter=j``), its
+    e² = error² read from each reconstruction. Guards against a stopping test that is absolute
+    in e² (``≤ tol``): with e² ≈ 0.16 here it is 6× looser and stops after 2 sweeps, not 4.
+    """
+    X = low_rank_plus_noise((20, 25, 30), (6, 6, 6), 0.05, seed=7)
+    ranks, tol = (5, 5, 5), 1e-3
+    k = hooi(X, ranks, tol=tol).iterations
+    assert k >= 3  # several sweeps: where it stops is a decision of the test under check
+    e2 = [hooi(X, ranks, tol=0.0, max_iter=j, throw=False).error ** 2 for j in range(k + 1)]
+    drop = -np.diff(e2)
+    assert np.all(drop[:-1] > tol * np.asarray(e2[:-2])), drop / np.asarray(e2[:-1])
+    assert drop[-1] <= tol * e2[-2], drop / np.asarray(e2[:-1])
+
+
 def test_hooi_keeps_ranks_above_the_product_of_the_others():
     """R_0 = 6 > R_1·R_2 = 4: the extra columns span nothing, but the ranks asked for stay."""
     X = smooth_tensor((10, 8, 9), seed=22)

@@ -74,14 +74,18 @@ def _view_coords(view: CameraView, points: Points) -> tuple[Array, Array, Array]
 def in_frustum(
     view: CameraView, points: Points, radius: float = 1.0, far: float = 1e4
 ) -> Bool[Array, " N"]:
-    """Whether a sphere of ``radius`` around each point touches the view frustum."""
+    """Whether a sphere of ``radius`` around each point touches the view frustum.
+
+    Conservative: a sphere less than ``radius`` outside every plane (near through the eye, the
+    four sides, ``far``) counts, so nothing visible is culled; one near a corner may pass.
+    """
     depth, x, y = _view_coords(view, points)
     tan_v = jnp.tan(jnp.deg2rad(view.fov_deg) / 2)
     tan_h = tan_v * view.aspect
     # Distance of the centre outside each side plane, measured perpendicular to the plane.
     out_h = (jnp.abs(x) - depth * tan_h) / jnp.sqrt(1 + tan_h**2)
     out_v = (jnp.abs(y) - depth * tan_v) / jnp.sqrt(1 + tan_v**2)
-    return (depth > -radius) & (depth < far) & (out_h < radius) & (out_v < radius)
+    return (depth > -radius) & (depth < far + radius) & (out_h < radius) & (out_v < radius)
 
 
 def screen_height_px(
