@@ -160,6 +160,7 @@ def test_simplify_rejects_too_many_levels(
     assert "at most 18 levels" in result["error"]["message"]
 
 
+@pytest.mark.slow
 def test_fit_writes_a_model_and_a_report(
     cmu16_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

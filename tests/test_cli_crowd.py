@@ -173,6 +173,7 @@ def test_run_bad_scenario_names_file_and_key(
     assert "groups[0].count" in result["error"]["message"]
 
 
+@pytest.mark.slow
 def test_demo_writes_mp4_and_png(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code, result = _json(
         capsys,
@@ -218,6 +219,7 @@ def test_dots_are_recorded_and_drawn(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert 0 < changed < 0.2
 
 
+@pytest.mark.slow
 def test_run_on_two_cpu_devices_records_the_same_crowd(tmp_path: Path) -> None:
     """`jcrowd run --cpu-devices 2` (a fresh process: the option must precede JAX's start) runs
     the crowd split over two CPU devices and records what one device records (nothing overflows
@@ -261,6 +263,7 @@ def test_cpu_devices_after_jax_started_is_a_clear_error(
     assert "--cpu-devices: expected 3 CPU devices, found 1" in err
 
 
+@pytest.mark.slow
 def test_render_on_two_cpu_devices(tmp_path: Path) -> None:
     """`jcrowd render` with the step split over two devices: a level's bucket then holds two
     shares of its capacity, rounded up and at least a chunk each (here more slots than the

@@ -67,6 +67,7 @@ def test_state_is_under_one_kilobyte_per_agent(model):
     assert nbytes / 10 <= 1024
 
 
+@pytest.mark.slow
 def test_padded_buckets_equal_unpadded(model):
     """Capacities with room to spare (padding slots) give the same crowd as tight ones."""
     sim, state = _sim(model)
@@ -106,6 +107,7 @@ def test_decode_bucket_runs_only_the_chunks_that_hold_agents(cap, used, chunk):
         assert not np.any(np.asarray(g)[run:])
 
 
+@pytest.mark.slow
 def test_chunked_step_equals_one_chunk(model):
     """Decoding buckets in chunks of 2 slots gives the crowd of one chunk per level."""
     sim, state = _sim(model)
@@ -122,6 +124,7 @@ def test_chunked_step_equals_one_chunk(model):
         )
 
 
+@pytest.mark.slow
 def test_jit_equals_eager(model):
     sim, state = _sim(model, count=6)
     eager = lambda s, v, dt: step(sim.crowd, sim.config, s, v, dt)  # noqa: E731
@@ -133,6 +136,7 @@ def test_jit_equals_eager(model):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-5, atol=2e-5)
 
 
+@pytest.mark.slow
 def test_frame_points_equal_direct_decode(model):
     """A level-0 agent's drawn points are the synthesis of its (clip, phase) before the step."""
     sim, state = _sim(model, count=8)
@@ -263,6 +267,7 @@ def _run_sharded(devices):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_sharded_over_four_devices_equals_one():
     one, four = _run_sharded(1), _run_sharded(4)
     assert four["devices"] == 4 and four["shards"] == 4
@@ -280,6 +285,7 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+@pytest.mark.slow
 def test_two_processes_on_loopback_equal_one_process(tmp_path):
     """`jcrowd run` as two processes (2 CPU devices each, one 4-device mesh over gloo) records
     the same crowd as one process on one device."""
@@ -328,6 +334,7 @@ def test_two_processes_on_loopback_equal_one_process(tmp_path):
     np.testing.assert_allclose(two["heading"], one["heading"], atol=1e-5)
 
 
+@pytest.mark.slow
 def test_detail_culling_turns_tiny_agents_into_walking_dots(model):
     """Agents shorter on screen than ``min_pixels`` are dots: not synthesized, still walking,
     counted; with ``min_pixels = 0`` the same agents are synthesized."""
@@ -352,6 +359,7 @@ def test_detail_culling_turns_tiny_agents_into_walking_dots(model):
     np.testing.assert_array_equal(synthesized, dots)  # exactly the agents in view
 
 
+@pytest.mark.slow
 def test_agents_beyond_the_budget_become_dots_and_count_as_overflow(model):
     sim, state = _sim(model, count=24, capacities=(1, 1, 1, 1, 1, 1), min_pixels=0.0)
     view = sim.view_at(0.0)
@@ -372,6 +380,7 @@ def _one_hot_rows(mix, samples):
     )
 
 
+@pytest.mark.slow
 def test_next_clip_is_kriged_for_synthesized_agents_and_captured_for_the_rest(model):
     """Agents not synthesized choose the nearest captured cycle (one-hot weights); agents
     synthesized get the kriged clip (dense weights)."""
@@ -413,6 +422,7 @@ def test_first_state_spreads_phases_and_no_choice_waits(model):
     assert sum(int(f.deferred) for f in frames) == 0
 
 
+@pytest.mark.slow
 def test_step_compiles_without_state_copies_and_same_results(model):
     """With copy insertion's region analysis (CPU), the compiled step copies no donated state
     buffer, and the crowd is bit-for-bit the one compiled without the option."""
@@ -438,6 +448,7 @@ def test_step_compiles_without_state_copies_and_same_results(model):
         np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
 
 
+@pytest.mark.slow
 def test_coarsest_level_cached_cores_match_direct_decode_across_clip_changes(model):
     """Every agent at the coarsest level for 50 steps (past its clip hand-over): each frame's
     points equal the decode of the agent's current clip computed from scratch."""

@@ -133,6 +133,7 @@ def _same(a: dict, b: dict) -> None:
         np.testing.assert_allclose(p, b["points"][k][1], atol=1e-5)
 
 
+@pytest.mark.slow
 def test_split_equals_blocks_when_the_budget_binds() -> None:
     caps = [2, 2, 2, 2, 4, 48]  # far fewer near slots than the 48 agents 0–40 m away want
     split, blocks = _run("split", 2, caps), _run("blocks", 1, caps)
@@ -144,6 +145,7 @@ def test_split_equals_blocks_when_the_budget_binds() -> None:
     assert shown == int((levels < len(caps)).sum())  # every placed agent is drawn once
 
 
+@pytest.mark.slow
 def test_split_equals_whole_crowd_when_nothing_overflows() -> None:
     split, whole = _run("split", 2), _run("whole", 1)
     assert whole["overflow"] == 0
@@ -177,6 +179,7 @@ path = { waypoints = [[0, 190]], loop = false }
 """
 
 
+@pytest.mark.slow
 def test_grouped_near_agents_fill_the_near_levels_as_on_one_device() -> None:
     """With agents interleaved over the devices, each device's share of level 0 serves near
     agents: 100 level-0 slots, 200 near agents — one device places 100 at level 0, two devices
