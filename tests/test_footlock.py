@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from jcrowd.model import foot_skate
-from jcrowd.motion import Motion, joint_positions, lock_feet, procedural_walk
+from jcrowd.motion import Motion, joint_positions, lock_feet, planted_slides, procedural_walk
 
 
 def test_a_sliding_walk_is_locked_and_a_planted_one_left_alone() -> None:
@@ -195,3 +195,32 @@ def test_double_support_steps_the_root_back_by_the_mean_slide() -> None:
         # Heights are left alone.
         assert locked[i, 1] == root[i, 1]
     assert double >= 10  # premise: double-support frames are among those checked
+
+
+def test_planted_slides_are_the_lower_joints_steps_on_truly_planted_frames() -> None:
+    """``planted_slides`` (shared by ``lock_feet`` and ``foot_skate``) against the walker's truth.
+
+    On every steady frame where the truth plants a foot, that foot's entry holds the frame, and
+    its step is the lower of ankle and toe moving to the next frame, computed here in NumPy.
+    Guards against the helper reporting the wrong frames, joint or axes for either foot.
+    """
+    skating, contacts = _skating_walk(wiggle=True)
+    pos = np.asarray(joint_positions(skating), np.float64)
+    names = skating.skeleton.names
+    found = planted_slides(skating)
+    assert len(found) == 2
+    checked = 0
+    for i in _steady_pairs(contacts):
+        for side, (frames, steps) in enumerate(found):
+            if not contacts[i, side]:
+                continue
+            ankle, toe = (names.index(n) for n in _FEET[side])
+            low = ankle if pos[i, ankle, 1] <= pos[i, toe, 1] else toe
+            k = np.searchsorted(frames, i)
+            assert k < len(frames) and frames[k] == i, (i, side)  # detected as planted
+            # Same float64 positions on both sides: only summation order differs.
+            np.testing.assert_allclose(
+                steps[k], pos[i + 1, low, [0, 2]] - pos[i, low, [0, 2]], atol=1e-12
+            )
+            checked += 1
+    assert checked > 150  # premise: both feet, single and double support

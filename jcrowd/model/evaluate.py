@@ -42,9 +42,8 @@ from jcrowd.model.motion_model import (
 from jcrowd.model.posevec import decode_clip
 from jcrowd.model.samples import CONTROL_NAMES, gait_samples
 from jcrowd.model.tensor_model import TensorModel, root_frame_positions
-from jcrowd.motion.clip import Clip, Motion, joint_positions
-from jcrowd.motion.footlock import lock_feet
-from jcrowd.motion.gait import foot_contacts
+from jcrowd.motion.clip import Clip, Motion
+from jcrowd.motion.footlock import lock_feet, planted_slides
 
 __all__ = ["ALL_CV_METHODS", "CV_METHODS", "evaluate_captures", "foot_skate", "leave_one_clip_out"]
 
@@ -165,18 +164,7 @@ def foot_skate(motion: Motion) -> float:
     next frame is the slide. A perfect plant slides 0; a capture's own value (marker noise, the
     heel-to-toe roll) is the reference to compare a synthesized clip with, at the same frame rate.
     """
-    contacts = foot_contacts(motion)
-    pos = np.asarray(joint_positions(motion), np.float64)
-    slides = []
-    feet = (
-        (contacts.left, contacts.feet.left_ankle, contacts.feet.left_toe),
-        (contacts.right, contacts.feet.right_ankle, contacts.feet.right_toe),
-    )
-    for flags, ankle, toe in feet:
-        on = np.nonzero(flags[:-1] & flags[1:])[0]
-        low = np.where(pos[on, ankle, 1] <= pos[on, toe, 1], ankle, toe)
-        step = pos[on + 1, low][:, [0, 2]] - pos[on, low][:, [0, 2]]
-        slides.append(np.linalg.norm(step, axis=-1))
+    slides = [np.linalg.norm(step, axis=-1) for _, step in planted_slides(motion)]
     every = np.concatenate(slides)
     return float(every.mean()) if every.size else 0.0
 

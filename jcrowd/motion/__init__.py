@@ -19,6 +19,7 @@ from jcrowd.motion.clip import rest_forward as rest_forward
 from jcrowd.motion.clip import slice_frames as slice_frames
 from jcrowd.motion.fastmath import sincos as sincos
 from jcrowd.motion.footlock import lock_feet as lock_feet
+from jcrowd.motion.footlock import planted_slides as planted_slides
 from jcrowd.motion.gait import ContactThresholds as ContactThresholds
 from jcrowd.motion.gait import FootContacts as FootContacts
 from jcrowd.motion.gait import FootJoints as FootJoints

@@ -18,24 +18,37 @@ import numpy as np
 from jcrowd.motion.clip import Motion, joint_positions
 from jcrowd.motion.gait import foot_contacts
 
-__all__ = ["lock_feet"]
+__all__ = ["lock_feet", "planted_slides"]
+
+
+def planted_slides(motion: Motion) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per foot (left, right): the frames it stays planted over and its planted joint's slide.
+
+    Returns, per foot, ``(frames (n,) int, slide (n, 2) float64)``: the frames ``i`` at which
+    the foot is in contact at ``i`` and ``i + 1`` (:func:`~jcrowd.motion.gait.foot_contacts`),
+    and the ``[x, z]`` step (m) from ``i`` to ``i + 1`` of its planted joint, the lower of its
+    ankle and toe at frame ``i`` (heel down, then toe down).
+    """
+    contacts = foot_contacts(motion)
+    pos = np.asarray(joint_positions(motion), np.float64)
+    out = []
+    for flags, ankle, toe in (
+        (contacts.left, contacts.feet.left_ankle, contacts.feet.left_toe),
+        (contacts.right, contacts.feet.right_ankle, contacts.feet.right_toe),
+    ):
+        on = np.nonzero(flags[:-1] & flags[1:])[0]
+        low = np.where(pos[on, ankle, 1] <= pos[on, toe, 1], ankle, toe)
+        out.append((on, pos[on + 1, low][:, [0, 2]] - pos[on, low][:, [0, 2]]))
+    return out
 
 
 def lock_feet(motion: Motion) -> Motion:
     """The clip with its root's horizontal path corrected so planted feet stay put."""
-    contacts = foot_contacts(motion)
-    pos = np.asarray(joint_positions(motion), np.float64)
     f = motion.num_frames
     slide = np.zeros((f - 1, 2))
     count = np.zeros(f - 1)
-    feet = (
-        (contacts.left, contacts.feet.left_ankle, contacts.feet.left_toe),
-        (contacts.right, contacts.feet.right_ankle, contacts.feet.right_toe),
-    )
-    for flags, ankle, toe in feet:
-        on = np.nonzero(flags[:-1] & flags[1:])[0]
-        low = np.where(pos[on, ankle, 1] <= pos[on, toe, 1], ankle, toe)
-        slide[on] += pos[on + 1, low][:, [0, 2]] - pos[on, low][:, [0, 2]]
+    for on, step in planted_slides(motion):
+        slide[on] += step
         count[on] += 1
     slide = np.where(count[:, None] > 0, slide / np.maximum(count, 1)[:, None], 0.0)
     root = np.asarray(motion.root_positions, np.float64).copy()
