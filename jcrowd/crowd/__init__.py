@@ -6,6 +6,10 @@ a recorded agent back into a clip. It never touches files, rendering or the CLI 
 contract checked in CI).
 """
 
+from jcrowd.crowd.avoidance import AvoidanceParams as AvoidanceParams
+from jcrowd.crowd.avoidance import avoid as avoid
+from jcrowd.crowd.avoidance import avoid_one as avoid_one
+from jcrowd.crowd.avoidance import closest_on_segments as closest_on_segments
 from jcrowd.crowd.clips import CrowdModel as CrowdModel
 from jcrowd.crowd.clips import build_crowd_model as build_crowd_model
 from jcrowd.crowd.clips import choose_controls as choose_controls
@@ -21,6 +25,11 @@ from jcrowd.crowd.lod import assign_buckets as assign_buckets
 from jcrowd.crowd.lod import distance_levels as distance_levels
 from jcrowd.crowd.lod import in_frustum as in_frustum
 from jcrowd.crowd.lod import screen_height_px as screen_height_px
+from jcrowd.crowd.neighbours import CellList as CellList
+from jcrowd.crowd.neighbours import GridSpec as GridSpec
+from jcrowd.crowd.neighbours import candidates as candidates
+from jcrowd.crowd.neighbours import cell_list as cell_list
+from jcrowd.crowd.neighbours import grid_spec as grid_spec
 from jcrowd.crowd.simulate import Simulation as Simulation
 from jcrowd.crowd.simulate import agent_mesh as agent_mesh
 from jcrowd.crowd.simulate import agent_order as agent_order

@@ -1,0 +1,174 @@
+"""The collision-free speed model (jcrowd.crowd.avoidance) against a NumPy transcription.
+
+The oracle below is the model's four equations (Tordeux, Chraibi & Seyfried 2016, Eqs. 1–4;
+walls as the module docstring reads them) written as plain float64 loops over every other agent
+and every wall, without the candidate lists, padding or masks of the JAX version.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jcrowd.crowd import AvoidanceParams, avoid, avoid_one, candidates, cell_list, grid_spec
+
+A, D, AW, DW, T = 8.0, 0.1, 5.0, 0.02, 1.0
+
+
+def _oracle(pos, desired, speed, radius, walls):
+    """Velocities and spacings of every agent, Eqs. (1)–(4), float64 loops."""
+    n = len(pos)
+    vel, gaps = np.zeros((n, 2)), np.full(n, np.inf)
+    for i in range(n):
+        e = np.array(desired[i], np.float64)
+        for j in range(n):
+            if j == i:
+                continue
+            d = pos[i] - pos[j]
+            s = np.hypot(*d)
+            e += A * np.exp((radius[i] + radius[j] - s) / D) * d / s
+        for a, b in walls:
+            t = np.clip(np.dot(pos[i] - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+            d = pos[i] - (a + t * (b - a))
+            s = np.hypot(*d)
+            e += AW * np.exp((radius[i] - s) / DW) * d / s
+        e /= np.hypot(*e)
+        for j in range(n):
+            if j == i:
+                continue
+            u = pos[j] - pos[i]
+            size = radius[i] + radius[j]
+            if np.dot(u, e) >= 0 and abs(u[0] * e[1] - u[1] * e[0]) <= size:
+                gaps[i] = min(gaps[i], np.hypot(*u) - size)
+        vel[i] = min(speed[i], max(0.0, gaps[i] / T)) * e
+    return vel, gaps
+
+
+def _scene(n, seed, spread=3.0):
+    rng = np.random.default_rng(seed)
+    pos = rng.uniform(-spread, spread, (n, 2))
+    # Keep agents apart by at least their sizes (the model's admissible states).
+    for _ in range(200):
+        d = np.linalg.norm(pos[:, None] - pos[None], axis=-1) + np.eye(n) * 9
+        i, j = np.unravel_index(np.argmin(d), d.shape)
+        if d[i, j] > 0.45:
+            break
+        pos[j] = rng.uniform(-spread, spread, 2)
+    angle = rng.uniform(-np.pi, np.pi, n)
+    desired = np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    speed = rng.uniform(0.8, 1.6, n)
+    radius = rng.uniform(0.17, 0.22, n)
+    walls = np.array([[[-4.0, -3.5], [4.0, -3.5]], [[3.6, -4.0], [3.6, 4.0]]])
+    return pos, desired, speed, radius, walls
+
+
+def _run(pos, desired, speed, radius, walls, cell=2.0):
+    """The JAX path as the step runs it: grid, candidates, every wall a candidate."""
+    n = len(pos)
+    f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, walls)]
+    spec = grid_spec((-6.0, -6.0), (6.0, 6.0), cell)
+    cl = cell_list(spec, f32[0], jnp.ones(n, bool))
+    cand = candidates(spec, cl, f32[0])
+    wall_ids = jnp.broadcast_to(jnp.arange(len(walls), dtype=jnp.int32), (n, len(walls)))
+    return avoid(AvoidanceParams(), *f32[:4], cand, f32[4], wall_ids)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_velocities_equal_the_equations(seed):
+    """Random 12-agent scenes inside one 12 m grid cell block: every pair interacts."""
+    pos, desired, speed, radius, walls = _scene(12, seed)
+    want_v, want_gap = _oracle(pos, desired, speed, radius, walls)
+    got_v, got_gap = _run(pos, desired, speed, radius, walls, cell=12.0)
+    # float32 against float64: positions of a few metres, exponentials summed; 2e-5 m/s is
+    # ~100 float32 ulps of a 1 m/s velocity.
+    np.testing.assert_allclose(np.asarray(got_v), want_v, atol=2e-5)
+    finite = np.isfinite(want_gap)
+    np.testing.assert_array_equal(np.isfinite(np.asarray(got_gap)), finite)
+    np.testing.assert_allclose(np.asarray(got_gap)[finite], want_gap[finite], atol=2e-5)
+    assert finite.any() and (~finite).any()  # premise: some have someone ahead, some not
+
+
+def test_a_dense_scene_through_the_grid_equals_all_pairs_beyond_the_cutoff():
+    """60 agents in 6 × 6 m with 2 m cells: neighbours farther than a cell are dropped by the
+    grid but repel by less than a·exp(−(2 − 0.44)/0.1) ≈ 1e-6, below the tolerance."""
+    pos, desired, speed, radius, walls = _scene(60, 7)
+    want_v, _ = _oracle(pos, desired, speed, radius, walls)
+    got_v, _ = _run(pos, desired, speed, radius, walls, cell=2.0)
+    np.testing.assert_allclose(np.asarray(got_v), want_v, atol=5e-5)
+
+
+def test_closed_forms():
+    """Alone: walks at its free speed; behind someone at gap g: speed g/T (the repulsion
+    a·e^{−g/D} only shortens the +z direction); touching (g = 0): R = a = 8 outweighs the
+    desire, the direction flips and, nobody being behind, it backs off at its free speed."""
+    walls = np.zeros((0, 2, 2))
+    for gap, want in ((None, 1.3), (0.5, 0.5), (2.0, 1.3), (0.0, -1.3)):
+        pos = [[0.0, 0.0]] if gap is None else [[0.0, 0.0], [0.0, 0.4 + gap]]
+        n = len(pos)
+        v, _ = _run(
+            np.array(pos), np.tile([0.0, 1.0], (n, 1)), np.full(n, 1.3), np.full(n, 0.2), walls
+        )
+        np.testing.assert_allclose(np.asarray(v)[0], [0.0, want], atol=1e-6)
+
+
+def test_a_wall_turns_an_agent_walking_into_it():
+    """Facing a wall at 1 cm beyond its radius, the repulsion a_w·e^{−0.5} ≈ 3 beats the desire."""
+    v, _ = _run(
+        np.array([[0.0, 0.0]]),
+        np.array([[0.0, 1.0]]),
+        np.array([1.0]),
+        np.array([0.2]),
+        np.array([[[-1.0, 0.21], [1.0, 0.21]]]),
+    )
+    assert float(np.asarray(v)[0, 1]) < 0.0
+
+
+def test_batched_equals_one_by_one_and_jit_equals_eager():
+    pos, desired, speed, radius, walls = _scene(10, 11)
+    args = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, walls)]
+    n = len(pos)
+    cand = jnp.asarray([[j for j in range(n) if j != i] for i in range(n)], jnp.int32)
+    wall_ids = jnp.zeros((n, 2), jnp.int32).at[:, 1].set(1)
+    p = AvoidanceParams()
+    batched = avoid(p, *args[:4], cand, args[4], wall_ids)
+    jitted = jax.jit(avoid)(p, *args[:4], cand, args[4], wall_ids)
+    for i in range(n):
+        one = avoid_one(
+            p,
+            args[0][i],
+            args[1][i],
+            args[2][i],
+            args[3][i],
+            args[0][cand[i]],
+            args[3][cand[i]],
+            jnp.ones(n - 1, bool),
+            args[4],
+            jnp.ones(2, bool),
+        )
+        np.testing.assert_allclose(np.asarray(batched[0][i]), np.asarray(one[0]), atol=1e-6)
+    np.testing.assert_allclose(np.asarray(jitted[0]), np.asarray(batched[0]), atol=1e-6)
+
+
+def test_gradients_are_finite_and_match_finite_differences():
+    """The velocity is differentiable in the repulsion strength (a later issue calibrates it):
+    central differences in float64 agree with jax.grad."""
+    pos, desired, speed, radius, walls = _scene(8, 4, spread=1.5)
+    n = len(pos)
+    cand = jnp.asarray([[j for j in range(n) if j != i] for i in range(n)], jnp.int32)
+    wall_ids = jnp.zeros((n, 2), jnp.int32).at[:, 1].set(1)
+    weights = np.random.default_rng(0).standard_normal((n, 2))  # a generic linear read-out
+    with jax.enable_x64(True):
+        args = [jnp.asarray(x, jnp.float64) for x in (pos, desired, speed, radius, walls)]
+
+        def total(a):
+            p = AvoidanceParams(a, 0.1, 5.0, 0.02, 1.0)
+            return jnp.sum(avoid(p, *args[:4], cand, args[4], wall_ids)[0] * weights)
+
+        a0, h = jnp.float64(8.0), 1e-5
+        fd = (total(a0 + h) - total(a0 - h)) / (2 * h)
+        g = jax.grad(total)(a0)
+        assert np.isfinite(float(g)) and abs(float(fd)) > 1e-6
+        # Central differences at h = 1e-5 in float64: truncation ~h² and rounding ~1e-11.
+        np.testing.assert_allclose(float(g), float(fd), rtol=1e-4)

@@ -1,0 +1,123 @@
+"""The neighbour grid (jcrowd.crowd.neighbours) against a brute-force all-pairs oracle."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jcrowd.crowd import candidates, cell_list, grid_spec
+from jcrowd.errors import JcrowdError
+
+
+def _crowd(n: int, seed: int, lo=(-5.0, -3.0), hi=(5.0, 3.0), dead=0.2):
+    rng = np.random.default_rng(seed)
+    pos = rng.uniform(lo, hi, size=(n, 2)).astype(np.float32)
+    alive = rng.random(n) >= dead
+    return pos, alive
+
+
+def _brute_cells(spec, pos, alive):
+    """Per cell, the alive agent ids in it, in id order (a plain loop over agents)."""
+    cells: dict[int, list[int]] = {}
+    for i, (x, z) in enumerate(pos):
+        if not alive[i]:
+            continue
+        ix = min(max(int(np.floor((x - spec.origin[0]) / spec.cell)), 0), spec.shape[0] - 1)
+        iz = min(max(int(np.floor((z - spec.origin[1]) / spec.cell)), 0), spec.shape[1] - 1)
+        cells.setdefault(ix * spec.shape[1] + iz, []).append(i)
+    return cells
+
+
+@pytest.mark.parametrize(("n", "cell", "seed"), [(200, 1.0, 0), (400, 0.7, 1), (60, 2.5, 2)])
+def test_cells_and_overflow_equal_a_loop_over_agents(n, cell, seed):
+    """Each cell stores its first ``capacity`` alive agents in id order; the rest are counted."""
+    pos, alive = _crowd(n, seed)
+    spec = grid_spec((-5.0, -3.0), (5.0, 3.0), cell, max_density=1.0, headroom=1.0)
+    cl = cell_list(spec, jnp.asarray(pos), jnp.asarray(alive))
+    slots = np.asarray(cl.slots)
+    brute = _brute_cells(spec, pos, alive)
+    overflow = 0
+    for c in range(spec.num_cells):
+        want = brute.get(c, [])
+        kept = want[: spec.capacity]
+        overflow += len(want) - len(kept)
+        assert list(slots[c][: len(kept)]) == kept, c
+        assert (slots[c][len(kept) :] == n).all(), c
+    assert int(cl.overflow) == overflow
+    assert overflow > 0  # premise: capacities chosen so some cells overflow
+
+
+def test_candidates_hold_every_neighbour_within_a_cell_size():
+    """Without overflow, every alive pair closer than the cell size meets in the candidates,
+    and no candidate is dead, the agent itself or outside the 3 × 3 cells (all-pairs oracle)."""
+    n = 300
+    pos, alive = _crowd(n, 3)
+    spec = grid_spec((-5.0, -3.0), (5.0, 3.0), 1.2)
+    cl = cell_list(spec, jnp.asarray(pos), jnp.asarray(alive))
+    assert int(cl.overflow) == 0
+    cand = np.asarray(candidates(spec, cl, jnp.asarray(pos)))
+    d = np.linalg.norm(pos[:, None] - pos[None], axis=-1)
+    near = (d < spec.cell) & alive[:, None] & alive[None] & ~np.eye(n, dtype=bool)
+    for i in range(n):
+        got = set(cand[i][cand[i] < n].tolist())
+        assert len(got) == np.sum(cand[i] < n)  # no duplicates
+        want = set(np.nonzero(near[i])[0].tolist())
+        assert want <= got, (i, want - got)
+        assert i not in got and all(alive[j] for j in got)
+        # Candidates lie in the 3 × 3 block: within two cell diagonals (clamping aside).
+        assert all(d[i, j] < 2 * np.sqrt(2) * spec.cell for j in got)
+    assert near.sum() > 500  # premise: plenty of close pairs
+
+
+def test_outside_agents_are_clamped_into_border_cells():
+    pos = np.array([[-50.0, 0.0], [-4.9, 0.1], [50.0, 50.0], [4.9, 2.9]], np.float32)
+    spec = grid_spec((-5.0, -3.0), (5.0, 3.0), 1.0)
+    cl = cell_list(spec, jnp.asarray(pos), jnp.ones(4, bool))
+    cell = np.asarray(cl.cell)
+    assert cell[0] == cell[1] and cell[2] == cell[3] == spec.num_cells - 1
+    cand = np.asarray(candidates(spec, cl, jnp.asarray(pos)))
+    assert 1 in cand[0] and 3 in cand[2]
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    n=st.integers(1, 80),
+    cell=st.floats(0.3, 4.0),
+    seed=st.integers(0, 10_000),
+)
+def test_every_alive_agent_is_stored_or_counted(n, cell, seed):
+    """Property: stored + overflow = alive, and an agent is stored at most once."""
+    pos, alive = _crowd(n, seed, dead=0.3)
+    spec = grid_spec((-5.0, -3.0), (5.0, 3.0), cell, max_density=2.0, headroom=1.0)
+    cl = cell_list(spec, jnp.asarray(pos), jnp.asarray(alive))
+    stored = np.asarray(cl.slots)
+    stored = stored[stored < n]
+    assert len(set(stored.tolist())) == len(stored)
+    assert len(stored) + int(cl.overflow) == int(alive.sum())
+
+
+def test_jit_equals_eager():
+    pos, alive = _crowd(150, 5)
+    spec = grid_spec((-5.0, -3.0), (5.0, 3.0), 1.0)
+
+    def both(p, a):
+        cl = cell_list(spec, p, a)
+        return cl.slots, cl.overflow, candidates(spec, cl, p)
+
+    eager = both(jnp.asarray(pos), jnp.asarray(alive))
+    jitted = jax.jit(both)(jnp.asarray(pos), jnp.asarray(alive))
+    for a, b in zip(eager, jitted, strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_grid_spec_errors_and_capacity():
+    spec = grid_spec((0.0, 0.0), (10.0, 4.0), 2.0)
+    assert spec.shape == (5, 2) and spec.capacity == 48  # 8 /m² × 4 m² × 1.5
+    with pytest.raises(JcrowdError, match="positive cell size"):
+        grid_spec((0.0, 0.0), (1.0, 1.0), 0.0)
+    with pytest.raises(JcrowdError, match="hi > lo"):
+        grid_spec((0.0, 0.0), (0.0, 1.0), 1.0)
