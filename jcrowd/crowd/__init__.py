@@ -25,6 +25,14 @@ from jcrowd.crowd.lod import assign_buckets as assign_buckets
 from jcrowd.crowd.lod import distance_levels as distance_levels
 from jcrowd.crowd.lod import in_frustum as in_frustum
 from jcrowd.crowd.lod import screen_height_px as screen_height_px
+from jcrowd.crowd.navigation import UNREACHABLE as UNREACHABLE
+from jcrowd.crowd.navigation import FieldGrid as FieldGrid
+from jcrowd.crowd.navigation import Navigation as Navigation
+from jcrowd.crowd.navigation import desired_directions as desired_directions
+from jcrowd.crowd.navigation import distance_field as distance_field
+from jcrowd.crowd.navigation import field_grid as field_grid
+from jcrowd.crowd.navigation import field_values as field_values
+from jcrowd.crowd.navigation import rasterize as rasterize
 from jcrowd.crowd.neighbours import CellList as CellList
 from jcrowd.crowd.neighbours import GridSpec as GridSpec
 from jcrowd.crowd.neighbours import candidates as candidates

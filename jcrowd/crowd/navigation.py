@@ -1,0 +1,164 @@
+"""Navigation: a distance-to-target field per target, and the direction down its gradient.
+
+Each target (a goal region, or a waypoint's neighbourhood) gets the shortest walking distance
+from every cell of a regular grid, around obstacles: the solution of the eikonal equation
+``|∇D| = 1`` with ``D = 0`` on the target, computed once when a scenario is prepared by fast
+marching (Sethian 1996) with scikit-fmm (second-order stencil). Fast marching was chosen over an
+iterative JAX eikonal solver because it visits each cell once (a Jacobi-style solver needs as
+many sweeps as the grid is wide, thousands for a 1 km site at 0.25 m) and the fields are computed
+once per scenario, on the host; the step only reads them.
+
+Cells inside obstacles carry the distance continued into the obstacle (the nearest walkable
+cell's value plus the step to it) for a band of a few cells, so that interpolating next to a wall
+gives a gradient along the wall, not into it; deeper obstacle cells and walkable cells that cannot
+reach the target hold :data:`UNREACHABLE`.
+
+An agent's desired direction is ``−∇D / |∇D|`` at its position, ``∇D`` by central differences
+of the bilinearly interpolated field (half a cell either side). The fields are one array
+``(targets, nx, nz)`` of float32: ``targets × cells × 4`` bytes.
+
+Conventions: ground points ``[x, z]`` in metres; cell ``(i, k)`` has its centre at
+``origin + (i + ½, k + ½)·cell``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import shapely
+import skfmm
+from jaxtyping import Array, Bool, Float, Int
+
+from jcrowd.errors import JcrowdError
+
+__all__ = [
+    "UNREACHABLE",
+    "FieldGrid",
+    "Navigation",
+    "desired_directions",
+    "distance_field",
+    "field_grid",
+    "field_values",
+    "rasterize",
+]
+
+UNREACHABLE = 1e6
+"""Field value (m) of cells that cannot reach the target, and deep inside obstacles."""
+
+_BAND = 3  # obstacle cells next to walkable ones that get a continued distance
+
+
+@dataclass(frozen=True)
+class FieldGrid:
+    """The static shape of the navigation grid: lower corner ``origin`` (m), ``cell`` (m),
+    ``shape`` = cells along x and z."""
+
+    origin: tuple[float, float]
+    cell: float
+    shape: tuple[int, int]
+
+    def centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """Cell-centre coordinates ``(x (nx, nz), z (nx, nz))``."""
+        x = self.origin[0] + (np.arange(self.shape[0]) + 0.5) * self.cell
+        z = self.origin[1] + (np.arange(self.shape[1]) + 0.5) * self.cell
+        return np.meshgrid(x, z, indexing="ij")
+
+
+def field_grid(lo: Sequence[float], hi: Sequence[float], cell: float = 0.25) -> FieldGrid:
+    """A grid covering ``lo``–``hi`` (m) with one cell of margin on every side."""
+    if not 0 < cell <= 0.25:
+        raise JcrowdError(f"navigation: expected a cell size in (0, 0.25] m, found {cell}")
+    nx = math.ceil((hi[0] - lo[0]) / cell) + 2
+    nz = math.ceil((hi[1] - lo[1]) / cell) + 2
+    return FieldGrid((float(lo[0]) - cell, float(lo[1]) - cell), float(cell), (nx, nz))
+
+
+def rasterize(grid: FieldGrid, area: shapely.Geometry) -> Bool[np.ndarray, "nx nz"]:
+    """Cells whose centre lies in ``area`` (boundary included)."""
+    x, z = grid.centres()
+    return np.asarray(shapely.intersects_xy(area, x, z))
+
+
+def distance_field(
+    grid: FieldGrid, walkable: Bool[np.ndarray, "nx nz"], target: Bool[np.ndarray, "nx nz"]
+) -> Float[np.ndarray, "nx nz"]:
+    """Shortest walking distance (m) from every cell to the ``target`` cells, around obstacles.
+
+    Target cells hold 0 … −½ cell (the signed distance inside the target); see the module
+    docstring for obstacle and unreachable cells.
+
+    Raises:
+        JcrowdError: no walkable target cell.
+    """
+    goal = target & walkable
+    if not goal.any():
+        raise JcrowdError("navigation: the target covers no walkable cell")
+    phi = np.ma.MaskedArray(np.where(goal, -1.0, 1.0), mask=~walkable)
+    d = skfmm.distance(phi, dx=grid.cell, order=2)
+    reached = walkable & ~np.ma.getmaskarray(d)
+    field = np.where(reached, np.ma.getdata(d), UNREACHABLE)
+    return _continue_into_obstacles(field, reached, ~walkable, grid.cell).astype(np.float32)
+
+
+def _continue_into_obstacles(
+    field: np.ndarray, known: np.ndarray, obstacle: np.ndarray, cell: float
+) -> np.ndarray:
+    """Give ``_BAND`` obstacle cells beyond the known ones their best neighbour's value plus the
+    step to it (walkable cells that cannot reach the target stay unreachable)."""
+    field, known = field.copy(), known.copy()
+    steps = [(di, dk, cell * math.hypot(di, dk)) for di in (-1, 0, 1) for dk in (-1, 0, 1)]
+    for _ in range(_BAND):
+        padded = np.pad(np.where(known, field, np.inf), 1, constant_values=np.inf)
+        best = np.full(field.shape, np.inf)
+        for di, dk, step in steps:
+            if di == dk == 0:
+                continue
+            shifted = padded[1 + di : 1 + di + field.shape[0], 1 + dk : 1 + dk + field.shape[1]]
+            best = np.minimum(best, shifted + step)
+        new = ~known & obstacle & np.isfinite(best)
+        field[new] = best[new]
+        known |= new
+    return field
+
+
+class Navigation(eqx.Module):
+    """Distance fields on one grid: ``fields`` ``(targets, nx, nz)`` float32 (m)."""
+
+    fields: Float[Array, "T nx nz"]
+    grid: FieldGrid = eqx.field(static=True)
+
+
+def field_values(nav: Navigation, target: Int[Array, " N"], x: Array, z: Array) -> Array:
+    """Bilinear interpolation of each agent's target field at ``(x, z)`` (clamped to the grid)."""
+    g = nav.grid
+    u = jnp.clip((x - g.origin[0]) / g.cell - 0.5, 0.0, g.shape[0] - 1.0)
+    v = jnp.clip((z - g.origin[1]) / g.cell - 0.5, 0.0, g.shape[1] - 1.0)
+    i0 = jnp.minimum(jnp.floor(u), g.shape[0] - 2.0)
+    k0 = jnp.minimum(jnp.floor(v), g.shape[1] - 2.0)
+    fu, fv = u - i0, v - k0
+    i0, k0 = i0.astype(jnp.int32), k0.astype(jnp.int32)
+    f = nav.fields
+    return (
+        f[target, i0, k0] * (1 - fu) * (1 - fv)
+        + f[target, i0 + 1, k0] * fu * (1 - fv)
+        + f[target, i0, k0 + 1] * (1 - fu) * fv
+        + f[target, i0 + 1, k0 + 1] * fu * fv
+    )
+
+
+def desired_directions(
+    nav: Navigation, target: Int[Array, " N"], position: Float[Array, "N 2"]
+) -> Float[Array, "N 2"]:
+    """Unit ``−∇D`` of each agent's target field at its position (0 where the field is flat)."""
+    h = 0.5 * nav.grid.cell
+    x, z = position[:, 0], position[:, 1]
+    gx = field_values(nav, target, x + h, z) - field_values(nav, target, x - h, z)
+    gz = field_values(nav, target, x, z + h) - field_values(nav, target, x, z - h)
+    norm = jnp.sqrt(gx * gx + gz * gz)
+    safe = jnp.maximum(norm, 1e-9)
+    return jnp.where(norm[:, None] > 1e-9, -jnp.stack([gx, gz], axis=1) / safe[:, None], 0.0)
