@@ -17,6 +17,12 @@ from jcrowd.crowd.clips import local_to_world as local_to_world
 from jcrowd.crowd.clips import next_clip as next_clip
 from jcrowd.crowd.clips import next_clips as next_clips
 from jcrowd.crowd.clips import next_clips_lod as next_clips_lod
+from jcrowd.crowd.dynamics import Pedestrians as Pedestrians
+from jcrowd.crowd.dynamics import StepInfo as StepInfo
+from jcrowd.crowd.dynamics import World as World
+from jcrowd.crowd.dynamics import build_world as build_world
+from jcrowd.crowd.dynamics import pedestrian_step as pedestrian_step
+from jcrowd.crowd.dynamics import wall_segments as wall_segments
 from jcrowd.crowd.export import RECORD_KEYS as RECORD_KEYS
 from jcrowd.crowd.export import agent_motion as agent_motion
 from jcrowd.crowd.lod import Buckets as Buckets

@@ -31,7 +31,6 @@ ids (:func:`jcrowd.crowd.neighbours.candidates`, ``N`` for none) and walls as se
 from __future__ import annotations
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
@@ -127,22 +126,46 @@ def avoid(
     """Every agent's velocity (Eqs. 1–4) from its candidate neighbours and walls.
 
     ``neighbours`` holds agent ids (``N`` for none), ``wall_ids`` segment ids into ``walls``
-    (``S`` for none). Returns ``(velocity (N, 2), spacing (N,))``; see :func:`avoid_one`.
+    (``S`` for none). Returns ``(velocity (N, 2), spacing (N,))``, what :func:`avoid_one` gives
+    agent by agent. Written on ``(N, M)`` arrays per coordinate rather than as a ``vmap`` of
+    :func:`avoid_one` over ``(M, 2)`` rows: XLA:CPU vectorizes loops over one contiguous axis,
+    and a minor axis of length 2 defeats that.
     """
     n, s = position.shape[0], walls.shape[0]
-    pad_pos = jnp.concatenate([position, jnp.zeros((1, 2), position.dtype)])
-    pad_rad = jnp.concatenate([radius, jnp.zeros((1,), radius.dtype)])
-    pad_walls = jnp.concatenate([walls, jnp.zeros((1, 2, 2), walls.dtype)])
-    one = jax.vmap(avoid_one, in_axes=(None, 0, 0, 0, 0, 0, 0, 0, 0, 0))
-    return one(
-        params,
-        position,
-        desired,
-        speed,
-        radius,
-        pad_pos[neighbours],
-        pad_rad[neighbours],
-        neighbours < n,
-        pad_walls[wall_ids],
-        wall_ids < s,
+    x, z = position[:, 0], position[:, 1]
+    px = jnp.concatenate([x, jnp.zeros((1,), x.dtype)])[neighbours]
+    pz = jnp.concatenate([z, jnp.zeros((1,), z.dtype)])[neighbours]
+    pr = jnp.concatenate([radius, jnp.zeros((1,), radius.dtype)])[neighbours]
+    valid = neighbours < n
+    dx, dz = x[:, None] - px, z[:, None] - pz  # from j to i
+    dist = jnp.sqrt(dx * dx + dz * dz)
+    inv = jnp.where(dist > _TINY, 1.0 / jnp.maximum(dist, _TINY), 0.0)
+    size = radius[:, None] + pr
+    push = jnp.where(valid, params.strength * jnp.exp((size - dist) / params.range), 0.0) * inv
+    ex = desired[:, 0] + jnp.sum(push * dx, axis=1)
+    ez = desired[:, 1] + jnp.sum(push * dz, axis=1)
+    pad = jnp.concatenate([walls, jnp.zeros((1, 2, 2), walls.dtype)])
+    ax, az = pad[:, 0, 0][wall_ids], pad[:, 0, 1][wall_ids]
+    bx, bz = pad[:, 1, 0][wall_ids], pad[:, 1, 1][wall_ids]
+    abx, abz = bx - ax, bz - az
+    t = ((x[:, None] - ax) * abx + (z[:, None] - az) * abz) / jnp.maximum(
+        abx * abx + abz * abz, _TINY**2
     )
+    t = jnp.clip(t, 0.0, 1.0)
+    wx, wz = x[:, None] - (ax + t * abx), z[:, None] - (az + t * abz)
+    wd = jnp.sqrt(wx * wx + wz * wz)
+    winv = jnp.where(wd > _TINY, 1.0 / jnp.maximum(wd, _TINY), 0.0)
+    wpush = params.wall_strength * jnp.exp((radius[:, None] - wd) / params.wall_range)
+    wpush = jnp.where(wall_ids < s, wpush, 0.0) * winv
+    ex = ex + jnp.sum(wpush * wx, axis=1)
+    ez = ez + jnp.sum(wpush * wz, axis=1)
+    norm = jnp.sqrt(ex * ex + ez * ez)
+    ok = norm > _TINY
+    ex = jnp.where(ok, ex / jnp.maximum(norm, _TINY), 0.0)
+    ez = jnp.where(ok, ez / jnp.maximum(norm, _TINY), 0.0)
+    # Neighbour j relative to i is (−dx, −dz): ahead when e·(x_j − x_i) ≥ 0.
+    ahead = -(dx * ex[:, None] + dz * ez[:, None]) >= 0.0
+    lateral = jnp.abs(dx * ez[:, None] - dz * ex[:, None])
+    gap = jnp.min(jnp.where(valid & ahead & (lateral <= size), dist - size, jnp.inf), axis=1)
+    v = jnp.minimum(speed, jnp.maximum(0.0, gap / params.time_gap))
+    return jnp.stack([v * ex, v * ez], axis=1), gap
