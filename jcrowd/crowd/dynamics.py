@@ -158,6 +158,7 @@ def build_world(
     nav_cell: float = 0.2,
     grid_cell: float = 2.0,
     max_density: float = 8.0,
+    clearance: float = 0.5,
 ) -> World:
     """The arrays of a scene: one distance field per target, walls, the neighbour grid.
 
@@ -167,6 +168,8 @@ def build_world(
         nav_cell: navigation grid cell (m, ≤ 0.25).
         grid_cell: neighbour grid cell (m): at least the avoidance's reach.
         max_density: agents per m² the neighbour grid's cells are sized for (with headroom).
+        clearance: how far paths keep off walls where there is room (m; see
+            :func:`~jcrowd.crowd.navigation.distance_field`).
 
     Raises:
         JcrowdError: an empty walkable area or a target that covers no walkable cell (named by
@@ -180,7 +183,7 @@ def build_world(
     fields = []
     for i, t in enumerate(targets):
         try:
-            fields.append(distance_field(fg, free, rasterize(fg, t)))
+            fields.append(distance_field(fg, free, rasterize(fg, t), clearance=clearance))
         except JcrowdError as err:
             raise JcrowdError(f"world: target {i}: {err}") from None
     walls = wall_segments(walkable)

@@ -85,9 +85,19 @@ def rasterize(grid: FieldGrid, area: shapely.Geometry) -> Bool[np.ndarray, "nx n
 
 
 def distance_field(
-    grid: FieldGrid, walkable: Bool[np.ndarray, "nx nz"], target: Bool[np.ndarray, "nx nz"]
+    grid: FieldGrid,
+    walkable: Bool[np.ndarray, "nx nz"],
+    target: Bool[np.ndarray, "nx nz"],
+    *,
+    clearance: float = 0.0,
 ) -> Float[np.ndarray, "nx nz"]:
     """Shortest walking distance (m) from every cell to the ``target`` cells, around obstacles.
+
+    With ``clearance > 0`` (m) the field is the travel time at unit speed through a medium that
+    slows towards walls, ``speed = 0.25 + 0.75·min(1, d_wall / clearance)`` (``d_wall``: the
+    cell's distance to the nearest obstacle), so the paths it sends agents on keep off walls and
+    corners (a shortest path touches every corner it turns around) yet still pass gaps narrower
+    than ``2·clearance``; far from walls it equals the distance.
 
     Target cells hold 0 … −½ cell (the signed distance inside the target); see the module
     docstring for obstacle and unreachable cells.
@@ -99,7 +109,13 @@ def distance_field(
     if not goal.any():
         raise JcrowdError("navigation: the target covers no walkable cell")
     phi = np.ma.MaskedArray(np.where(goal, -1.0, 1.0), mask=~walkable)
-    d = skfmm.distance(phi, dx=grid.cell, order=2)
+    if clearance > 0 and (~walkable).any():
+        wall = np.asarray(skfmm.distance(np.where(walkable, 1.0, -1.0), dx=grid.cell))
+        speed = 0.25 + 0.75 * np.clip(wall / clearance, 0.0, 1.0)
+        d = skfmm.travel_time(phi, np.ma.MaskedArray(speed, mask=~walkable), dx=grid.cell)
+        d = np.ma.where(goal, -np.ma.abs(d), d)  # travel times are unsigned; the target is ≤ 0
+    else:
+        d = skfmm.distance(phi, dx=grid.cell, order=2)
     reached = walkable & ~np.ma.getmaskarray(d)
     field = np.where(reached, np.ma.getdata(d), UNREACHABLE)
     return _continue_into_obstacles(field, reached, ~walkable, grid.cell).astype(np.float32)

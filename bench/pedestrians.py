@@ -1,0 +1,630 @@
+"""Crowd dynamics against real pedestrian experiments and JuPedSim, side by side (issue 18).
+
+Every scene runs twice in this process, on the same geometry, start positions and entry times:
+with jcrowd's pedestrian step (:func:`jcrowd.crowd.pedestrian_step`, the collision-free speed
+model) and with JuPedSim's ``CollisionFreeSpeedModel`` (defaults, the same model family). Both
+sides are measured with PedPy exactly as the experiments are (``../shared/data/pedestrians``).
+
+Sections (``--sections``, default all):
+
+- ``bottleneck``: 150 agents in a 10 m × 10 m room leave through a 4 m corridor of width
+  0.8 … 2.4 m; flow = crossings of the corridor entrance per second over the middle 80 % of
+  them; the linear fit's r² over widths.
+- ``entrance``: the Wuppertal 2018 entrance run (75 people, 0.5 m gap) from the measured start
+  positions; flow through the gap (middle 80 % of crossings), first-to-last crossing time,
+  Voronoi density in front of the gap.
+- ``fd``: each HERMES run (``--hermes DIR``; file names ``uo-<entrance>-<corridor>-<exit>`` in
+  cm) re-simulated: people are fed in where and when the measurement first sees them (just
+  behind the entrance, so the measured entrance flow is the input), the exit opening is a gap of
+  the run's width in a 0.2 m wall at the corridor's end; Voronoi density and speed in the
+  measurement area over the run's steady state; Weidmann's curve as a second reference.
+- ``speed``: agent-steps per second of the dynamics alone on an open area with pillars at
+  0.5 agents/m², jcrowd vs JuPedSim.
+
+Safety over every jcrowd scene: ``min_gap_ratio`` (smallest centre distance ÷ (r_i + r_j)),
+``inside_obstacle`` (agent-frames whose centre is outside the walkable area), ``nan``, and
+``stuck``: agents still in the scene when the run ends, a run lasting three times the longer of
+the reference's time to empty the scene (the experiment, else JuPedSim in the same run) and the
+farthest agent's free-walking time.
+
+``python bench/pedestrians.py [--sections ...] [--hermes DIR] [--json]``; appends a row to
+bench/RESULTS.md and writes ``docs/pedestrians_fd.png`` and ``docs/pedestrians_bottleneck.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import jupedsim as jps
+import numpy as np
+import pandas as pd
+import pedpy
+import shapely
+from common import ROOT, machine, report
+
+from jcrowd.crowd import AvoidanceParams, Pedestrians, build_world, pedestrian_step
+
+DATA = ROOT.parent / "shared" / "data" / "pedestrians"
+DT = 1.0 / 30.0
+RADIUS = 0.2  # JuPedSim's default radius, used on both sides
+SPEED = 1.34  # free walking speed (Weidmann 1993)
+ENTRANCE_RADIUS = 0.13
+SPAWN_GAP = 2.05  # an entering agent waits until nobody is within 2.05 radii of its spot
+
+
+# ------------------------------------------------------------------------------ two simulators
+
+
+def run_jcrowd(area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RADIUS, gap=SPAWN_GAP):
+    """jcrowd's dynamics; agents appear at ``spawn_t`` once their spot is free.
+
+    Returns ``(positions (F, N, 2), alive (F, N))`` at every step and the seconds per step.
+    """
+    world = build_world(area, [target])
+    n = len(spawn_xy)
+    xy = jnp.asarray(spawn_xy, jnp.float32)
+    start = jnp.asarray(spawn_t, jnp.float32)
+    params = AvoidanceParams()
+    peds = Pedestrians(
+        xy,
+        jnp.zeros(n, jnp.int32),
+        jnp.full(n, speed, jnp.float32),
+        jnp.full(n, radius, jnp.float32),
+        jnp.zeros(n, bool),
+    )
+
+    def one(carry, t):
+        peds, pending = carry
+        p = peds.position
+        d2 = jnp.sum((xy[:, None] - p[None]) ** 2, axis=-1)
+        blocked = jnp.any(peds.alive[None] & (d2 < (gap * radius) ** 2), axis=1)
+        appear = pending & (start <= t) & ~blocked
+        # One agent per step and spot: among those appearing, drop any within 2r of a lower id.
+        close = (jnp.sum((xy[:, None] - xy[None]) ** 2, -1) < (2 * radius) ** 2) & jnp.tri(
+            n, k=-1, dtype=bool
+        )
+        appear = appear & ~jnp.any(close & appear[None], axis=1)
+        peds = Pedestrians(
+            jnp.where(appear[:, None], xy, p),
+            peds.target,
+            peds.speed,
+            peds.radius,
+            peds.alive | appear,
+        )
+        peds, _ = pedestrian_step(params, world, peds, DT)
+        return (peds, pending & ~appear), (peds.position, peds.alive)
+
+    @jax.jit
+    def chunk(carry, ts):
+        return jax.lax.scan(one, carry, ts)
+
+    carry = (peds, jnp.ones(n, bool))
+    steps = int(math.ceil(t_max / DT))
+    out_p, out_a = [], []
+    t0 = time.perf_counter()
+    for k0 in range(0, steps, 300):
+        ts = jnp.arange(k0, min(k0 + 300, steps), dtype=jnp.float32) * DT
+        carry, (pos, alive) = chunk(carry, ts)
+        out_p.append(np.asarray(pos))
+        out_a.append(np.asarray(alive))
+        if not bool(carry[0].alive.any()) and not bool(carry[1].any()):
+            break
+    seconds = time.perf_counter() - t0
+    pos, alive = np.concatenate(out_p), np.concatenate(out_a)
+    return pos, alive, seconds / len(pos)
+
+
+def run_jupedsim(area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RADIUS, gap=SPAWN_GAP):
+    """JuPedSim's collision-free speed model on the same scene (agents added at ``spawn_t``
+    when no agent is within 2r of the spot). Same outputs as :func:`run_jcrowd`."""
+    sim = jps.Simulation(model=jps.CollisionFreeSpeedModel(), geometry=area, dt=DT)
+    exit_id = sim.add_exit_stage(target)
+    journey = sim.add_journey(jps.JourneyDescription([exit_id]))
+    n = len(spawn_xy)
+    ids = np.full(n, -1)
+    order = np.argsort(spawn_t, kind="stable")
+    steps = int(math.ceil(t_max / DT))
+    pos = np.full((steps, n, 2), np.nan, np.float32)
+    alive = np.zeros((steps, n), bool)
+    next_k = 0
+    t0 = time.perf_counter()
+    k = 0
+    for k in range(steps):
+        t = k * DT
+        here = [a.position for a in sim.agents()]  # agents added now show after iterate()
+        while next_k < n and spawn_t[order[next_k]] <= t:
+            i = order[next_k]
+            if (
+                here
+                and np.min(np.linalg.norm(np.asarray(here) - spawn_xy[i], axis=1)) < gap * radius
+            ):
+                break
+            try:  # JuPedSim checks against positions newer than sim.agents() shows
+                ids[i] = sim.add_agent(
+                    jps.CollisionFreeSpeedModelAgentParameters(
+                        journey_id=journey,
+                        stage_id=exit_id,
+                        position=tuple(map(float, spawn_xy[i])),
+                        desired_speed=speed,
+                        radius=radius,
+                    )
+                )
+            except RuntimeError:
+                break  # the spot is taken: try again next step
+            here.append(tuple(spawn_xy[i]))
+            next_k += 1
+        sim.iterate()
+        where = {a.id: a.position for a in sim.agents()}
+        for i in range(n):
+            if ids[i] >= 0 and ids[i] in where:
+                pos[k, i] = where[ids[i]]
+                alive[k, i] = True
+        if next_k == n and sim.agent_count() == 0:
+            break
+    seconds = time.perf_counter() - t0
+    return pos[: k + 1], alive[: k + 1], seconds / (k + 1)
+
+
+# ------------------------------------------------------------------------------ measurements
+
+
+def crossings(pos, alive, axis, level, sign=-1.0):
+    """Time (s) each agent first crosses ``pos[..., axis] = level`` moving in ``sign``."""
+    side = np.where(alive, sign * (pos[..., axis] - level) > 0, False)
+    first = np.argmax(side, axis=0)
+    return np.where(side.any(axis=0), (first + 1) * DT, np.nan)
+
+
+def middle_flow(times):
+    t = np.sort(times[np.isfinite(times)])
+    if len(t) < 5:
+        return 0.0
+    k0, k1 = int(0.1 * len(t)), int(0.9 * len(t)) - 1
+    return (k1 - k0) / max(t[k1] - t[k0], 1e-9)
+
+
+def safety(pos, alive, area, radius=RADIUS):
+    gaps = []
+    for f in range(0, len(pos), 3):
+        p = pos[f][alive[f]]
+        if len(p) > 1:
+            d = np.linalg.norm(p[:, None] - p[None], axis=-1) + 1e9 * np.eye(len(p))
+            gaps.append(d.min() / (2 * radius))
+    p = pos[alive]
+    inside = shapely.contains_xy(shapely.buffer(area, 1e-3), p[:, 0], p[:, 1])
+    return {
+        "min_gap_ratio": float(min(gaps)) if gaps else float("nan"),
+        "inside_obstacle": int((~inside).sum()),
+        "nan": int((~np.isfinite(p)).sum()),
+        "stuck": int(alive[-1].sum()),
+    }
+
+
+def trajectory(pos, alive, fps):
+    f, i = np.nonzero(alive)
+    df = pd.DataFrame({"id": i, "frame": f, "x": pos[f, i, 0], "y": pos[f, i, 1]})
+    return pedpy.TrajectoryData(data=df, frame_rate=fps)
+
+
+# ------------------------------------------------------------------------------ bottleneck
+
+
+def bottleneck_scene(width):
+    room = shapely.box(0.0, 0.0, 10.0, 10.0)
+    corridor = shapely.box(5.0 - width / 2, 10.0 - 1e-9, 5.0 + width / 2, 14.0)
+    return shapely.union(room, corridor), shapely.box(5 - width / 2, 13.5, 5 + width / 2, 14)
+
+
+def bottleneck(widths, out):
+    starts = np.array(
+        jps.distributions.distribute_by_number(
+            polygon=shapely.box(0.5, 0.5, 9.5, 9.5),
+            number_of_agents=150,
+            distance_to_agents=0.45,
+            distance_to_polygon=0.3,
+            seed=1,
+        )
+    )
+    ours, theirs, safe = [], [], []
+    for w in widths:
+        area, exit_ = bottleneck_scene(w)
+        jp, ja, _ = run_jupedsim(area, exit_, starts, np.zeros(150), 400.0)
+        t_ref = len(jp) * DT
+        p, a, _ = run_jcrowd(area, exit_, starts, np.zeros(150), 3 * t_ref)
+        ours.append(middle_flow(crossings(p, a, 1, 10.0, +1.0)))
+        theirs.append(middle_flow(crossings(jp, ja, 1, 10.0, +1.0)))
+        safe.append(safety(p, a, area))
+        print(
+            f"bottleneck {w} m: jcrowd {ours[-1]:.2f} /s, JuPedSim {theirs[-1]:.2f} /s", flush=True
+        )
+    fit = np.polyfit(widths, ours, 1)
+    pred = np.polyval(fit, widths)
+    r2 = 1 - np.sum((np.array(ours) - pred) ** 2) / np.sum((ours - np.mean(ours)) ** 2)
+    out["bottleneck_widths_m"] = list(widths)
+    out["bottleneck_flow_per_s"] = [round(x, 3) for x in ours]
+    out["jupedsim_bottleneck_flow_per_s"] = [round(x, 3) for x in theirs]
+    out["bottleneck_r2"] = round(float(r2), 4)
+    out["safety"]["bottleneck"] = _worst(safe)
+
+
+def _worst(items):
+    return {
+        "min_gap_ratio": min(s["min_gap_ratio"] for s in items),
+        "inside_obstacle": sum(s["inside_obstacle"] for s in items),
+        "nan": sum(s["nan"] for s in items),
+        "stuck": sum(s["stuck"] for s in items),
+    }
+
+
+# ------------------------------------------------------------------------------ entrance
+
+
+def entrance(out):
+    left = shapely.Polygon(
+        [
+            (-0.7, -1.1),
+            (-0.25, -1.1),
+            (-0.25, -0.15),
+            (-0.4, 0),
+            (-2.8, 0),
+            (-2.8, 6.7),
+            (-3.05, 6.7),
+            (-3.05, -0.3),
+            (-0.7, -0.3),
+            (-0.7, -1.0),
+        ]
+    )
+    right = shapely.Polygon(
+        [
+            (0.25, -1.1),
+            (0.7, -1.1),
+            (0.7, -0.3),
+            (3.05, -0.3),
+            (3.05, 6.7),
+            (2.8, 6.7),
+            (2.8, 0),
+            (0.4, 0),
+            (0.25, -0.15),
+            (0.25, -1.1),
+        ]
+    )
+    area = shapely.box(-3.5, -2.0, 3.5, 8.0).difference(shapely.union(left, right))
+    exit_ = shapely.box(-3.5, -2.0, 3.5, -1.6)
+    d = np.loadtxt(DATA / "bottleneck_entrance" / "040_c_56_h-.txt", comments="#")
+    first = d[d[:, 1] == d[:, 1].min()]
+    starts = first[:, 2:4]
+    n = len(starts)
+    measured_total = 64.5
+    # The measured crowd stands closer than 0.4 m centre to centre (0.27 m at the start): a
+    # 0.2 m disc cannot hold it, so both simulators get 0.13 m discs here.
+    r = ENTRANCE_RADIUS
+    run = {"radius": r, "gap": 2.0}  # everyone stands where measured at t = 0
+    p, a, _ = run_jcrowd(area, exit_, starts, np.zeros(n), 3 * measured_total, **run)
+    jp, ja, _ = run_jupedsim(area, exit_, starts, np.zeros(n), 3 * measured_total, **run)
+    res = {}
+    for name, (pp, aa) in (("jcrowd", (p, a)), ("jupedsim", (jp, ja))):
+        t = crossings(pp, aa, 1, 0.0)
+        t = t[np.isfinite(t)]
+        res[name] = {
+            "flow": middle_flow(t),
+            "total": float(t.max() - t.min()) if len(t) > 1 else float("nan"),
+            "crossed": int(len(t)),
+            "density": _entrance_density(pp, aa, area, t),
+        }
+    out["entrance_flow_per_s"] = round(res["jcrowd"]["flow"], 3)
+    out["entrance_total_s"] = round(res["jcrowd"]["total"], 2)
+    out["entrance_density_per_m2"] = round(res["jcrowd"]["density"], 2)
+    out["jupedsim_entrance"] = {k: round(v, 3) for k, v in res["jupedsim"].items()}
+    out["entrance_measured"] = {"flow": 1.16, "total": 64.5, "density": 5.9}
+    out["safety"]["entrance"] = safety(p, a, area, r)
+    print(f"entrance: {res}", flush=True)
+
+
+def _entrance_density(pos, alive, area, times):
+    if len(times) < 2:
+        return float("nan")
+    traj = trajectory(pos, alive, 1 / DT)
+    walk = pedpy.WalkableArea(area)
+    ma = pedpy.MeasurementArea([(-0.4, 0.5), (0.4, 0.5), (0.4, 1.3), (-0.4, 1.3)])
+    vor = pedpy.compute_individual_voronoi_polygons(traj_data=traj, walkable_area=walk)
+    dens, _ = pedpy.compute_voronoi_density(individual_voronoi_data=vor, measurement_area=ma)
+    f0, f1 = int(times.min() / DT), int(times.max() / DT)
+    sel = dens[(dens.index >= f0) & (dens.index <= f1)] if "frame" not in dens else dens
+    if "frame" in dens:
+        sel = dens[(dens.frame >= f0) & (dens.frame <= f1)]
+    return float(sel["density"].mean())
+
+
+# ------------------------------------------------------------------------------ HERMES
+
+
+HERMES_AREA = shapely.Polygon(
+    [
+        (2.8, -6.5),
+        (2.8, -4),
+        (1.8, -4),
+        (1.8, 4),
+        (2.8, 4),
+        (2.8, 8),
+        (-1, 8),
+        (-1, 4),
+        (0, 4),
+        (0, -4),
+        (-1, -4),
+        (-1, -6.5),
+    ]
+)
+HERMES_FPS = 16.0
+
+
+def hermes_scene(exit_cm):
+    b = exit_cm / 100.0
+    area = HERMES_AREA
+    if b < 1.8 - 1e-6:
+        wall = shapely.union(
+            shapely.box(-1.0, -4.2, 0.9 - b / 2, -4.0), shapely.box(0.9 + b / 2, -4.2, 2.8, -4.0)
+        )
+        area = area.difference(wall)
+    return area, shapely.box(-1.0, -6.5, 2.8, -6.0)
+
+
+def weidmann(rho):
+    return 1.34 * (1 - np.exp(-1.913 * (1 / np.maximum(rho, 1e-3) - 1 / 5.4)))
+
+
+def fd(folder, out):
+    steady = pd.read_csv(folder / "steady_state.csv").set_index("run")
+    rows = []
+    for f in sorted(folder.glob("uo-*.txt")):
+        m = re.match(r"uo-(\d+)-(\d+)-(\d+)", f.stem)
+        if not m or f.stem not in steady.index:
+            continue
+        d = np.loadtxt(f, comments="#")
+        d[:, 2:4] /= 100.0  # cm -> m
+        ids = np.unique(d[:, 0])
+        first = np.array([d[d[:, 0] == i][0] for i in ids])
+        spawn_xy, spawn_t = first[:, 2:4].copy(), first[:, 1] / HERMES_FPS
+        # First seen at the camera's edge, up to y = 8 m: moved inside the holding area by a
+        # radius (JuPedSim refuses agents touching a wall).
+        spawn_xy[:, 0] = np.clip(spawn_xy[:, 0], -1.0 + RADIUS + 0.02, 2.8 - RADIUS - 0.02)
+        spawn_xy[:, 1] = np.minimum(spawn_xy[:, 1], 8.0 - RADIUS - 0.02)
+        area, target = hermes_scene(float(m.group(3)))
+        t_ref = d[:, 1].max() / HERMES_FPS
+        measured = _fd_measure(d, HERMES_FPS, steady.loc[f.stem], HERMES_AREA)
+        p, a, _ = run_jcrowd(area, target, spawn_xy, spawn_t, 3 * t_ref)
+        jp, ja, _ = run_jupedsim(area, target, spawn_xy, spawn_t, 3 * t_ref)
+        sim = _fd_measure_sim(p, a, steady.loc[f.stem], area)
+        jsim = _fd_measure_sim(jp, ja, steady.loc[f.stem], area)
+        rows.append(
+            {
+                "run": f.stem,
+                "measured_density": round(measured[0], 3),
+                "measured_speed": round(measured[1], 3),
+                "density": round(sim[0], 3),
+                "speed": round(sim[1], 3),
+                "jupedsim_density": round(jsim[0], 3),
+                "jupedsim_speed": round(jsim[1], 3),
+                "safety": safety(p, a, area),
+            }
+        )
+        print(f"fd {rows[-1]}", flush=True)
+    ms = np.array([r["measured_speed"] for r in rows])
+    out["fd"] = rows
+    out["fd_speed_rmse_m_s"] = round(
+        float(np.sqrt(np.mean((np.array([r["speed"] for r in rows]) - ms) ** 2))), 3
+    )
+    out["jupedsim_fd_speed_rmse_m_s"] = round(
+        float(np.sqrt(np.mean((np.array([r["jupedsim_speed"] for r in rows]) - ms) ** 2))), 3
+    )
+    out["fd_density_rel_error"] = [round(r["density"] / r["measured_density"] - 1, 3) for r in rows]
+    out["weidmann_speed_rmse_m_s"] = round(
+        float(
+            np.sqrt(np.mean((weidmann(np.array([r["measured_density"] for r in rows])) - ms) ** 2))
+        ),
+        3,
+    )
+    out["safety"]["fd"] = _worst([r.pop("safety") for r in rows])
+
+
+_MA = pedpy.MeasurementArea([(0, -2), (1.8, -2), (1.8, 0), (0, 0)])
+
+
+def _fd_from_traj(traj, walk, f0, f1, frame_step):
+    vor = pedpy.compute_individual_voronoi_polygons(traj_data=traj, walkable_area=walk)
+    dens, inter = pedpy.compute_voronoi_density(individual_voronoi_data=vor, measurement_area=_MA)
+    speed = pedpy.compute_individual_speed(
+        traj_data=traj,
+        frame_step=frame_step,
+        speed_calculation=pedpy.SpeedCalculation.BORDER_SINGLE_SIDED,
+    )
+    vs = pedpy.compute_voronoi_speed(
+        traj_data=traj,
+        individual_speed=speed,
+        individual_voronoi_intersection=inter,
+        measurement_area=_MA,
+    )
+    fd_ = dens.reset_index() if "frame" not in dens.columns else dens
+    vs_ = vs.reset_index() if "frame" not in vs.columns else vs
+    dsel = fd_[(fd_.frame >= f0) & (fd_.frame <= f1)]["density"].mean()
+    vsel = vs_[(vs_.frame >= f0) & (vs_.frame <= f1)]["speed"].mean()
+    return float(dsel), float(vsel)
+
+
+def _fd_measure(d, fps, window, area):
+    df = pd.DataFrame(
+        {"id": d[:, 0].astype(int), "frame": d[:, 1].astype(int), "x": d[:, 2], "y": d[:, 3]}
+    )
+    traj = pedpy.TrajectoryData(data=df, frame_rate=fps)
+    return _fd_from_traj(traj, pedpy.WalkableArea(area), window.first_frame, window.last_frame, 5)
+
+
+def _fd_measure_sim(pos, alive, window, area):
+    traj = trajectory(pos, alive, 1 / DT)
+    scale = (1 / DT) / HERMES_FPS
+    f0, f1 = int(window.first_frame * scale), int(window.last_frame * scale)
+    return _fd_from_traj(traj, pedpy.WalkableArea(HERMES_AREA), f0, f1, round(5 * scale))
+
+
+# ------------------------------------------------------------------------------ speed
+
+
+def speed(sizes, out):
+    ours, theirs = {}, {}
+    for n in sizes:
+        side = math.sqrt(n / 0.5)
+        pillars = [
+            shapely.box(x, z, x + 2, z + 2)
+            for x in np.arange(10, side - 10, 25)
+            for z in np.arange(10, side - 10, 25)
+        ]
+        area = shapely.box(0, 0, side, side).difference(shapely.unary_union(pillars))
+        target = shapely.box(side - 2, 0, side, side)
+        rng = np.random.default_rng(0)
+        pts = rng.uniform(1, side - 3, (4 * n, 2))
+        pts = pts[shapely.contains_xy(area.buffer(-0.3), pts[:, 0], pts[:, 1])][:n]
+        world = build_world(area, [target], grid_cell=1.0)
+        peds = Pedestrians(
+            jnp.asarray(pts, jnp.float32),
+            jnp.zeros(n, jnp.int32),
+            jnp.full(n, SPEED, jnp.float32),
+            jnp.full(n, RADIUS, jnp.float32),
+            jnp.ones(n, bool),
+        )
+        step = jax.jit(pedestrian_step)
+        params = AvoidanceParams()
+        peds, _ = step(params, world, peds, DT)
+        jax.block_until_ready(peds)
+        ts = []
+        for _ in range(10):
+            t0 = time.perf_counter()
+            peds, _ = step(params, world, peds, DT)
+            jax.block_until_ready(peds)
+            ts.append(time.perf_counter() - t0)
+        ours[n] = float(np.median(ts))
+        sim = jps.Simulation(model=jps.CollisionFreeSpeedModel(), geometry=area, dt=DT)
+        ex = sim.add_exit_stage(target)
+        j = sim.add_journey(jps.JourneyDescription([ex]))
+        for p in pts:
+            sim.add_agent(
+                jps.CollisionFreeSpeedModelAgentParameters(
+                    journey_id=j,
+                    stage_id=ex,
+                    position=tuple(map(float, p)),
+                    desired_speed=SPEED,
+                    radius=RADIUS,
+                )
+            )
+        sim.iterate()
+        ts = []
+        for _ in range(5 if n >= 50000 else 10):
+            t0 = time.perf_counter()
+            sim.iterate()
+            ts.append(time.perf_counter() - t0)
+        theirs[n] = float(np.median(ts))
+        print(
+            f"speed {n}: jcrowd {1e3 * ours[n]:.1f} ms, JuPedSim {1e3 * theirs[n]:.1f} ms",
+            flush=True,
+        )
+    out["dynamics_ms"] = {str(n): round(1e3 * ours[n], 2) for n in sizes}
+    out["jupedsim_ms"] = {str(n): round(1e3 * theirs[n], 2) for n in sizes}
+    out["speedup_vs_jupedsim"] = {str(n): round(theirs[n] / ours[n], 2) for n in sizes}
+
+
+# ------------------------------------------------------------------------------ main
+
+
+def _text(out):
+    lines = []
+    if "bottleneck_flow_per_s" in out:
+        lines += [
+            "| bottleneck width m | "
+            + " | ".join(f"{w:g}" for w in out["bottleneck_widths_m"])
+            + " |",
+            "|---|" + "---|" * len(out["bottleneck_widths_m"]),
+            "| jcrowd flow /s | "
+            + " | ".join(f"{x:.2f}" for x in out["bottleneck_flow_per_s"])
+            + " |",
+            "| JuPedSim flow /s | "
+            + " | ".join(f"{x:.2f}" for x in out["jupedsim_bottleneck_flow_per_s"])
+            + " |",
+            "",
+            f"bottleneck r² {out['bottleneck_r2']}",
+        ]
+    if "entrance_flow_per_s" in out:
+        j = out["jupedsim_entrance"]
+        lines += [
+            "",
+            f"entrance (measured 1.16 /s, 64.5 s, 5.9 /m²): jcrowd {out['entrance_flow_per_s']} /s, "
+            f"{out['entrance_total_s']} s, {out['entrance_density_per_m2']} /m²; JuPedSim "
+            f"{j['flow']} /s, {j['total']} s, {j['density']} /m²",
+        ]
+    if "fd" in out:
+        lines += [
+            "",
+            "| HERMES run | measured ρ /m² | v m/s | jcrowd ρ | v | JuPedSim ρ | v |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        lines += [
+            f"| {r['run']} | {r['measured_density']:.2f} | {r['measured_speed']:.2f} | "
+            f"{r['density']:.2f} | {r['speed']:.2f} | {r['jupedsim_density']:.2f} | "
+            f"{r['jupedsim_speed']:.2f} |"
+            for r in out["fd"]
+        ]
+        lines += [
+            "",
+            f"speed RMSE: jcrowd {out['fd_speed_rmse_m_s']} m/s, JuPedSim "
+            f"{out['jupedsim_fd_speed_rmse_m_s']} m/s, Weidmann {out['weidmann_speed_rmse_m_s']} m/s",
+        ]
+    if "speedup_vs_jupedsim" in out:
+        sizes = list(out["dynamics_ms"])
+        lines += [
+            "",
+            "| agents | " + " | ".join(sizes) + " |",
+            "|---|" + "---|" * len(sizes),
+            "| jcrowd dynamics ms/step | "
+            + " | ".join(str(out["dynamics_ms"][s]) for s in sizes)
+            + " |",
+            "| JuPedSim ms/step | " + " | ".join(str(out["jupedsim_ms"][s]) for s in sizes) + " |",
+            "| speed-up | " + " | ".join(f"{out['speedup_vs_jupedsim'][s]}×" for s in sizes) + " |",
+        ]
+    if out["safety"]:
+        lines += ["", f"safety: {out['safety']}"]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sections", default="bottleneck,entrance,fd,speed")
+    ap.add_argument("--hermes", type=Path, default=DATA / "hermes_uo")
+    ap.add_argument("--widths", default="0.8,1.2,1.6,2.0,2.4")
+    ap.add_argument("--sizes", default="1000,10000,50000,100000")
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--no-record", action="store_true")
+    args = ap.parse_args()
+    sections = set(args.sections.split(","))
+    out: dict = {
+        "safety": {},
+        "machine": machine(),
+        "jax": jax.__version__,
+        "jupedsim": jps.__version__,
+    }
+    if "bottleneck" in sections:
+        bottleneck([float(w) for w in args.widths.split(",")], out)
+    if "entrance" in sections:
+        entrance(out)
+    if "fd" in sections:
+        fd(args.hermes, out)
+    if "speed" in sections:
+        speed([int(n) for n in args.sizes.split(",")], out)
+    details = f"{out['machine']}, jax {out['jax']}, JuPedSim {out['jupedsim']}, dt 1/30 s, sections {args.sections}"
+    report("pedestrians", details, out, _text(out), args.json, not args.no_record)
+
+
+if __name__ == "__main__":
+    main()
