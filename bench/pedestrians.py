@@ -105,7 +105,7 @@ def run_jcrowd(area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RADIU
         return jax.lax.scan(one, carry, ts)
 
     carry = (peds, jnp.ones(n, bool))
-    steps = int(math.ceil(t_max / DT))
+    steps = math.ceil(t_max / DT)
     out_p, out_a = [], []
     t0 = time.perf_counter()
     for k0 in range(0, steps, 300):
@@ -129,7 +129,7 @@ def run_jupedsim(area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RAD
     n = len(spawn_xy)
     ids = np.full(n, -1)
     order = np.argsort(spawn_t, kind="stable")
-    steps = int(math.ceil(t_max / DT))
+    steps = math.ceil(t_max / DT)
     pos = np.full((steps, n, 2), np.nan, np.float32)
     alive = np.zeros((steps, n), bool)
     next_k = 0
@@ -314,7 +314,7 @@ def entrance(out):
         res[name] = {
             "flow": middle_flow(t),
             "total": float(t.max() - t.min()) if len(t) > 1 else float("nan"),
-            "crossed": int(len(t)),
+            "crossed": len(t),
             "density": _entrance_density(pp, aa, area, t),
         }
     out["entrance_flow_per_s"] = round(res["jcrowd"]["flow"], 3)
@@ -476,8 +476,8 @@ def _fd_measure_sim(pos, alive, window, area):
 
 def speed(sizes, out):
     ours, theirs = {}, {}
-    for n in sizes:
-        side = math.sqrt(n / 0.5)
+    for size in sizes:
+        side = 1.15 * math.sqrt(size / 0.5)  # room for the pillars and the margins
         pillars = [
             shapely.box(x, z, x + 2, z + 2)
             for x in np.arange(10, side - 10, 25)
@@ -485,9 +485,15 @@ def speed(sizes, out):
         ]
         area = shapely.box(0, 0, side, side).difference(shapely.unary_union(pillars))
         target = shapely.box(side - 2, 0, side, side)
+        # A jittered lattice at 0.5 /m² (spacing 1.41 m, jitter ±0.3 m: no two closer than
+        # 0.8 m), the cells inside pillars left out.
         rng = np.random.default_rng(0)
-        pts = rng.uniform(1, side - 3, (4 * n, 2))
-        pts = pts[shapely.contains_xy(area.buffer(-0.3), pts[:, 0], pts[:, 1])][:n]
+        k = np.arange(1.0, side - 3.0, math.sqrt(2.0))
+        pts = np.stack(np.meshgrid(k, k), -1).reshape(-1, 2)
+        pts = pts + rng.uniform(-0.3, 0.3, pts.shape)
+        pts = pts[shapely.contains_xy(area.buffer(-0.3), pts[:, 0], pts[:, 1])][:size]
+        n = len(pts)
+        assert n == size, (n, size)
         world = build_world(area, [target], grid_cell=1.0)
         peds = Pedestrians(
             jnp.asarray(pts, jnp.float32),
@@ -506,7 +512,7 @@ def speed(sizes, out):
             peds, _ = step(params, world, peds, DT)
             jax.block_until_ready(peds)
             ts.append(time.perf_counter() - t0)
-        ours[n] = float(np.median(ts))
+        ours[size] = float(np.median(ts))
         sim = jps.Simulation(model=jps.CollisionFreeSpeedModel(), geometry=area, dt=DT)
         ex = sim.add_exit_stage(target)
         j = sim.add_journey(jps.JourneyDescription([ex]))
@@ -522,13 +528,13 @@ def speed(sizes, out):
             )
         sim.iterate()
         ts = []
-        for _ in range(5 if n >= 50000 else 10):
+        for _ in range(5 if size >= 50000 else 10):
             t0 = time.perf_counter()
             sim.iterate()
             ts.append(time.perf_counter() - t0)
-        theirs[n] = float(np.median(ts))
+        theirs[size] = float(np.median(ts))
         print(
-            f"speed {n}: jcrowd {1e3 * ours[n]:.1f} ms, JuPedSim {1e3 * theirs[n]:.1f} ms",
+            f"speed {size}: jcrowd {1e3 * ours[size]:.1f} ms, JuPedSim {1e3 * theirs[size]:.1f} ms",
             flush=True,
         )
     out["dynamics_ms"] = {str(n): round(1e3 * ours[n], 2) for n in sizes}
@@ -560,8 +566,9 @@ def _text(out):
         j = out["jupedsim_entrance"]
         lines += [
             "",
-            f"entrance (measured 1.16 /s, 64.5 s, 5.9 /m²): jcrowd {out['entrance_flow_per_s']} /s, "
-            f"{out['entrance_total_s']} s, {out['entrance_density_per_m2']} /m²; JuPedSim "
+            "entrance (measured 1.16 /s, 64.5 s, 5.9 /m²): "
+            f"jcrowd {out['entrance_flow_per_s']} /s, {out['entrance_total_s']} s, "
+            f"{out['entrance_density_per_m2']} /m²; JuPedSim "
             f"{j['flow']} /s, {j['total']} s, {j['density']} /m²",
         ]
     if "fd" in out:
@@ -579,7 +586,8 @@ def _text(out):
         lines += [
             "",
             f"speed RMSE: jcrowd {out['fd_speed_rmse_m_s']} m/s, JuPedSim "
-            f"{out['jupedsim_fd_speed_rmse_m_s']} m/s, Weidmann {out['weidmann_speed_rmse_m_s']} m/s",
+            f"{out['jupedsim_fd_speed_rmse_m_s']} m/s, "
+            f"Weidmann {out['weidmann_speed_rmse_m_s']} m/s",
         ]
     if "speedup_vs_jupedsim" in out:
         sizes = list(out["dynamics_ms"])
@@ -622,7 +630,10 @@ def main() -> None:
         fd(args.hermes, out)
     if "speed" in sections:
         speed([int(n) for n in args.sizes.split(",")], out)
-    details = f"{out['machine']}, jax {out['jax']}, JuPedSim {out['jupedsim']}, dt 1/30 s, sections {args.sections}"
+    details = (
+        f"{out['machine']}, jax {out['jax']}, JuPedSim {out['jupedsim']}, dt 1/30 s, "
+        f"sections {args.sections}"
+    )
     report("pedestrians", details, out, _text(out), args.json, not args.no_record)
 
 
