@@ -18,8 +18,10 @@ Sections (``--sections``, default all):
   behind the entrance, so the measured entrance flow is the input), the exit opening is a gap of
   the run's width in a 0.2 m wall at the corridor's end; Voronoi density and speed in the
   measurement area over the run's steady state; Weidmann's curve as a second reference.
-- ``speed``: agent-steps per second of the dynamics alone on an open area with pillars at
-  0.5 agents/m², jcrowd vs JuPedSim.
+- ``speed``: median ms per step of the dynamics alone at 0.5 agents/m² walking across a square
+  with 2 m pillars every 25 m (the issue's "open area with obstacles"; JuPedSim's step cost
+  grows with the obstacles) and across the same square without them, jcrowd (one CPU device)
+  vs JuPedSim.
 
 Safety over every jcrowd scene: ``min_gap_ratio`` (smallest centre distance ÷ (r_i + r_j)),
 ``inside_obstacle`` (agent-frames whose centre is outside the walkable area), ``nan``, and
@@ -474,16 +476,20 @@ def _fd_measure_sim(pos, alive, window, area):
 # ------------------------------------------------------------------------------ speed
 
 
-def speed(sizes, out):
+def speed(sizes, out, pillars=True):
+    """Median ms per step of both on a square at 0.5 agents/m² walking to one side, with 2 m
+    pillars every 25 m (``pillars``) or open."""
     ours, theirs = {}, {}
     for size in sizes:
         side = 1.15 * math.sqrt(size / 0.5)  # room for the pillars and the margins
-        pillars = [
+        blocks = [
             shapely.box(x, z, x + 2, z + 2)
             for x in np.arange(10, side - 10, 25)
             for z in np.arange(10, side - 10, 25)
         ]
-        area = shapely.box(0, 0, side, side).difference(shapely.unary_union(pillars))
+        area = shapely.box(0, 0, side, side)
+        if pillars:
+            area = area.difference(shapely.unary_union(blocks))
         target = shapely.box(side - 2, 0, side, side)
         # A jittered lattice at 0.5 /m² (spacing 1.41 m, jitter ±0.3 m: no two closer than
         # 0.8 m), the cells inside pillars left out.
@@ -537,9 +543,52 @@ def speed(sizes, out):
             f"speed {size}: jcrowd {1e3 * ours[size]:.1f} ms, JuPedSim {1e3 * theirs[size]:.1f} ms",
             flush=True,
         )
-    out["dynamics_ms"] = {str(n): round(1e3 * ours[n], 2) for n in sizes}
-    out["jupedsim_ms"] = {str(n): round(1e3 * theirs[n], 2) for n in sizes}
-    out["speedup_vs_jupedsim"] = {str(n): round(theirs[n] / ours[n], 2) for n in sizes}
+    tag = "" if pillars else "_open"
+    out[f"dynamics_ms{tag}"] = {str(n): round(1e3 * ours[n], 2) for n in sizes}
+    out[f"jupedsim_ms{tag}"] = {str(n): round(1e3 * theirs[n], 2) for n in sizes}
+    out[f"speedup_vs_jupedsim{tag}"] = {str(n): round(theirs[n] / ours[n], 2) for n in sizes}
+
+
+# ------------------------------------------------------------------------------ plots
+
+
+def plot(out):
+    """``docs/pedestrians_fd.png`` and ``docs/pedestrians_bottleneck.png`` from the results."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    docs = ROOT / "docs"
+    if "fd" in out:
+        fig, ax = plt.subplots(figsize=(6, 4), dpi=120)
+        rho = np.linspace(0.3, 4.0, 200)
+        ax.plot(rho, weidmann(rho), "k--", lw=1, label="Weidmann 1993")
+        for key, mark, label in (
+            ("measured", "o", "HERMES (measured)"),
+            ("", "s", "jcrowd"),
+            ("jupedsim_", "^", "JuPedSim"),
+        ):
+            d = [r[f"{key}density"] for r in out["fd"]]
+            v = [r[f"{key}speed"] for r in out["fd"]]
+            ax.scatter(d, v, marker=mark, label=label, zorder=3)
+        ax.set(xlabel="Voronoi density (1/m²)", ylabel="Voronoi speed (m/s)", xlim=(0, 4))
+        ax.set_title("Fundamental diagram, HERMES corridor runs (PedPy on both)")
+        ax.legend()
+        fig.tight_layout()
+        fig.savefig(docs / "pedestrians_fd.png")
+        plt.close(fig)
+    if "bottleneck_flow_per_s" in out:
+        fig, ax = plt.subplots(figsize=(6, 4), dpi=120)
+        w = out["bottleneck_widths_m"]
+        ax.plot(w, out["bottleneck_flow_per_s"], "s-", label="jcrowd")
+        ax.plot(w, out["jupedsim_bottleneck_flow_per_s"], "^-", label="JuPedSim")
+        ax.set(xlabel="bottleneck width (m)", ylabel="flow (1/s)")
+        ax.set_title("150 agents through a 4 m corridor")
+        ax.legend()
+        fig.tight_layout()
+        fig.savefig(docs / "pedestrians_bottleneck.png")
+        plt.close(fig)
 
 
 # ------------------------------------------------------------------------------ main
@@ -589,17 +638,23 @@ def _text(out):
             f"{out['jupedsim_fd_speed_rmse_m_s']} m/s, "
             f"Weidmann {out['weidmann_speed_rmse_m_s']} m/s",
         ]
-    if "speedup_vs_jupedsim" in out:
-        sizes = list(out["dynamics_ms"])
+    for tag, what in (("", "with pillars"), ("_open", "open square")):
+        if f"speedup_vs_jupedsim{tag}" not in out:
+            continue
+        sizes = list(out[f"dynamics_ms{tag}"])
         lines += [
             "",
-            "| agents | " + " | ".join(sizes) + " |",
+            f"| agents ({what}) | " + " | ".join(sizes) + " |",
             "|---|" + "---|" * len(sizes),
             "| jcrowd dynamics ms/step | "
-            + " | ".join(str(out["dynamics_ms"][s]) for s in sizes)
+            + " | ".join(str(out[f"dynamics_ms{tag}"][s]) for s in sizes)
             + " |",
-            "| JuPedSim ms/step | " + " | ".join(str(out["jupedsim_ms"][s]) for s in sizes) + " |",
-            "| speed-up | " + " | ".join(f"{out['speedup_vs_jupedsim'][s]}×" for s in sizes) + " |",
+            "| JuPedSim ms/step | "
+            + " | ".join(str(out[f"jupedsim_ms{tag}"][s]) for s in sizes)
+            + " |",
+            "| speed-up | "
+            + " | ".join(f"{out[f'speedup_vs_jupedsim{tag}'][s]}×" for s in sizes)
+            + " |",
         ]
     if out["safety"]:
         lines += ["", f"safety: {out['safety']}"]
@@ -630,10 +685,12 @@ def main() -> None:
         fd(args.hermes, out)
     if "speed" in sections:
         speed([int(n) for n in args.sizes.split(",")], out)
+        speed([int(n) for n in args.sizes.split(",")], out, pillars=False)
     details = (
         f"{out['machine']}, jax {out['jax']}, JuPedSim {out['jupedsim']}, dt 1/30 s, "
         f"sections {args.sections}"
     )
+    plot(out)
     report("pedestrians", details, out, _text(out), args.json, not args.no_record)
 
 
