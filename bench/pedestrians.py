@@ -565,7 +565,7 @@ def plot(out):
         rho = np.linspace(0.3, 4.0, 200)
         ax.plot(rho, weidmann(rho), "k--", lw=1, label="Weidmann 1993")
         for key, mark, label in (
-            ("measured", "o", "HERMES (measured)"),
+            ("measured_", "o", "HERMES (measured)"),
             ("", "s", "jcrowd"),
             ("jupedsim_", "^", "JuPedSim"),
         ):
