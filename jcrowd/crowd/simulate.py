@@ -293,7 +293,19 @@ def _per_device_step(crowd: CrowdModel, config: StepConfig, devices: list[Any]) 
 
 
 def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdState]:
-    """Build the simulation and its first state (deterministic from ``scenario.seed``)."""
+    """Build the simulation and its first state (deterministic from ``scenario.seed``).
+
+    Raises:
+        ScenarioError: the scenario has obstacles, walls or a walkable area: they are parsed and
+            checked, but the crowd step does not drive agents around them yet (the standalone
+            :func:`~jcrowd.crowd.dynamics.pedestrian_step` does), so running it would walk
+            agents through walls.
+    """
+    if not scenario.layout.empty:
+        raise ScenarioError(
+            f"{scenario.source}: obstacles/walls/walkable: expected a scenario without a layout "
+            "(the crowd step does not route agents around obstacles yet), found one"
+        )
     crowd = build_crowd_model(model)
     levels = len(model.levels)
     lod = scenario.lod

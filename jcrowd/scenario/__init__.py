@@ -7,11 +7,18 @@ reads and checks it into a :class:`Scenario` (errors name the file and the key p
 """
 
 from jcrowd.scenario.geometry import MIN_POLYGON_AREA_M2 as MIN_POLYGON_AREA_M2
+from jcrowd.scenario.geometry import Region as Region
 from jcrowd.scenario.geometry import polygon_area as polygon_area
 from jcrowd.scenario.geometry import polygon_contains as polygon_contains
 from jcrowd.scenario.geometry import polygon_problem as polygon_problem
 from jcrowd.scenario.geometry import sample_triangles as sample_triangles
 from jcrowd.scenario.geometry import triangulate as triangulate
+from jcrowd.scenario.layout import MAX_SPAWN_DENSITY as MAX_SPAWN_DENSITY
+from jcrowd.scenario.layout import Layout as Layout
+from jcrowd.scenario.layout import Wall as Wall
+from jcrowd.scenario.layout import check_layout as check_layout
+from jcrowd.scenario.layout import free_space as free_space
+from jcrowd.scenario.layout import region_shape as region_shape
 from jcrowd.scenario.parse import load_scenario as load_scenario
 from jcrowd.scenario.parse import parse_scenario as parse_scenario
 from jcrowd.scenario.schema import DEFAULT_THRESHOLDS_M as DEFAULT_THRESHOLDS_M
@@ -20,7 +27,6 @@ from jcrowd.scenario.schema import CameraKey as CameraKey
 from jcrowd.scenario.schema import Group as Group
 from jcrowd.scenario.schema import LodSettings as LodSettings
 from jcrowd.scenario.schema import Path as Path
-from jcrowd.scenario.schema import Region as Region
 from jcrowd.scenario.schema import Scenario as Scenario
 from jcrowd.scenario.schema import camera_at as camera_at
 from jcrowd.scenario.spawning import LATERAL_JITTER_M as LATERAL_JITTER_M

@@ -18,20 +18,33 @@ from typing import Any, NoReturn, TypeVar
 
 from jcrowd.errors import ScenarioError, where
 from jcrowd.scenario.check import Problem, show
+from jcrowd.scenario.geometry import Region
+from jcrowd.scenario.layout import Layout, Wall
 from jcrowd.scenario.schema import (
     Camera,
     CameraKey,
     Group,
     LodSettings,
     Path,
-    Region,
     Scenario,
 )
 
 __all__ = ["load_scenario", "parse_scenario"]
 
 _T = TypeVar("_T")
-_TOP = ("model", "seed", "duration", "fps", "ground", "camera", "lod", "groups")
+_TOP = (
+    "model",
+    "seed",
+    "duration",
+    "fps",
+    "ground",
+    "camera",
+    "lod",
+    "groups",
+    "obstacles",
+    "walls",
+    "walkable",
+)
 _GROUP = ("name", "count", "spawn", "path", "goal", "speed", "height", "color")
 _CAMERA = ("eye", "target", "keys", "fov", "width", "height", "near", "far")
 _CAMERA_KEY = ("time", "eye", "target")
@@ -100,6 +113,25 @@ class _Reader:
         if "goal" in t:
             kw["goal"] = self.region(t["goal"], f"{path}.goal")
         return self.build(path, Group, **kw)
+
+    def tables(self, doc: dict[str, Any], key: str) -> list[Any]:
+        """The ``[[key]]`` tables of the document (none when absent)."""
+        value = doc.get(key, [])
+        if not isinstance(value, list):
+            self.fail(key, f"expected [[{key}]] tables, found {show(value)}")
+        return value
+
+    def layout(self, doc: dict[str, Any]) -> Layout:
+        obstacles = tuple(
+            self.region(o, f"obstacles[{i}]") for i, o in enumerate(self.tables(doc, "obstacles"))
+        )
+        walls = []
+        for i, w in enumerate(self.tables(doc, "walls")):
+            path = f"walls[{i}]"
+            t = self.table(w, path, ("points", "thickness"), ("points",))
+            walls.append(self.build(path, Wall, t["points"], t.get("thickness", 0.2)))
+        walkable = self.region(doc["walkable"], "walkable") if "walkable" in doc else None
+        return Layout(obstacles, tuple(walls), walkable)
 
     def camera(self, value: Any) -> Camera:
         t = self.table(value, "camera", _CAMERA)
@@ -189,6 +221,7 @@ def parse_scenario(
         groups=tuple(r.group(g, f"groups[{i}]") for i, g in enumerate(groups)),
         camera=r.camera(doc["camera"]),
         lod=r.build("lod", LodSettings, **{_LOD[k]: v for k, v in lod.items()}),
+        layout=r.layout(doc),
     )
 
 

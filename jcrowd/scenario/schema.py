@@ -23,11 +23,10 @@ The parser only walks the tables (unknown and missing keys) and prefixes the fil
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from jaxtyping import Bool, Float
+from jaxtyping import Float
 
 from jcrowd.scenario.check import (
     Problem,
@@ -40,13 +39,8 @@ from jcrowd.scenario.check import (
     value_range,
 )
 from jcrowd.scenario.check import points as point_list
-from jcrowd.scenario.geometry import (
-    polygon_area,
-    polygon_contains,
-    polygon_problem,
-    sample_triangles,
-    triangulate,
-)
+from jcrowd.scenario.geometry import Region
+from jcrowd.scenario.layout import Layout, check_layout
 
 __all__ = [
     "DEFAULT_THRESHOLDS_M",
@@ -55,7 +49,6 @@ __all__ = [
     "Group",
     "LodSettings",
     "Path",
-    "Region",
     "Scenario",
     "camera_at",
 ]
@@ -69,98 +62,6 @@ HEIGHT_RANGE = (1.0, 2.2)  # m, standing heights the model is scaled to
 
 
 # ----------------------------------------------------------------------------------- data model
-
-
-@dataclass(frozen=True, eq=False)
-class Region:
-    """An area of the ground: a rectangle, a circle or a simple polygon (x–z, metres).
-
-    ``kind`` is ``"rect"`` (axis-aligned: ``center`` and ``size = [width along x, depth along
-    z]``), ``"circle"`` (``center``, ``radius``) or ``"polygon"`` (``points``: ≥ 3, no crossing
-    or touching edges, positive area, either orientation, not closed by repeating the first
-    point). Fields a kind does not use keep their defaults. ``sample`` is uniform over the area.
-    """
-
-    kind: str
-    center: Float[np.ndarray, " 2"] = field(default_factory=lambda: np.zeros(2))
-    size: Float[np.ndarray, " 2"] = field(default_factory=lambda: np.zeros(2))
-    radius: float = 0.0
-    points: Float[np.ndarray, "P 2"] = field(default_factory=lambda: np.zeros((0, 2)))
-    _triangles: np.ndarray = field(init=False, repr=False, default_factory=lambda: np.zeros(0))
-
-    def __post_init__(self) -> None:
-        put = object.__setattr__
-        kinds = '"rect", "circle" or "polygon"'
-        require(self.kind in ("rect", "circle", "polygon"), "shape", kinds, self.kind)
-        if self.kind == "polygon":
-            points = point_list(self.points, "points")
-            problem = polygon_problem(points)
-            if problem is not None:
-                raise Problem("points", problem)
-            put(self, "points", points)
-            put(self, "_triangles", triangulate(points))
-            return
-        put(self, "center", reals(self.center, "center", "[x, z] (m)", 2))
-        if self.kind == "rect":
-            size = reals(self.size, "size", "[width, depth] (m)", 2)
-            require(np.all(size > 0), "size", "[width, depth] both > 0 (m)", self.size)
-            put(self, "size", size)
-        else:
-            require(
-                real(self.radius) and self.radius > 0,
-                "radius",
-                "a radius > 0 (m)",
-                self.radius,
-            )
-            put(self, "radius", float(self.radius))
-
-    @classmethod
-    def rect(cls, center: Sequence[float], size: Sequence[float]) -> Region:
-        return cls("rect", center=np.asarray(center, np.float64), size=np.asarray(size, np.float64))
-
-    @classmethod
-    def circle(cls, center: Sequence[float], radius: float) -> Region:
-        return cls("circle", center=np.asarray(center, np.float64), radius=radius)
-
-    @classmethod
-    def polygon(cls, points: Sequence[Sequence[float]]) -> Region:
-        return cls("polygon", points=np.asarray(points, np.float64))
-
-    @property
-    def area(self) -> float:
-        """Area in m²."""
-        if self.kind == "rect":
-            return float(self.size[0] * self.size[1])
-        if self.kind == "circle":
-            return math.pi * self.radius**2
-        return abs(polygon_area(self.points))
-
-    def bounds(self) -> tuple[Float[np.ndarray, " 2"], Float[np.ndarray, " 2"]]:
-        """Axis-aligned bounding box ``(lo, hi)``, each ``[x, z]``."""
-        if self.kind == "rect":
-            return self.center - self.size / 2, self.center + self.size / 2
-        if self.kind == "circle":
-            return self.center - self.radius, self.center + self.radius
-        return self.points.min(axis=0), self.points.max(axis=0)
-
-    def sample(self, rng: np.random.Generator, n: int) -> Float[np.ndarray, "n 2"]:
-        """``n`` points uniform over the region, ``(n, 2)`` float64."""
-        if self.kind == "rect":
-            return self.center + (rng.random((n, 2)) - 0.5) * self.size
-        if self.kind == "circle":
-            r = self.radius * np.sqrt(rng.random(n))  # √u: uniform per unit area, not per radius
-            angle = rng.uniform(0.0, 2.0 * math.pi, n)
-            return self.center + r[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
-        return sample_triangles(self._triangles, rng, n)
-
-    def contains(self, points: Float[np.ndarray, "M 2"]) -> Bool[np.ndarray, " M"]:
-        """Which of ``points`` lie in the region (boundary included for rects and circles)."""
-        p = np.asarray(points, np.float64).reshape(-1, 2)
-        if self.kind == "rect":
-            return np.all(np.abs(p - self.center) <= self.size / 2, axis=1)
-        if self.kind == "circle":
-            return np.sum((p - self.center) ** 2, axis=1) <= self.radius**2
-        return polygon_contains(self.points, p)
 
 
 @dataclass(frozen=True, eq=False)
@@ -339,7 +240,9 @@ class LodSettings:
 class Scenario:
     """A whole scenario. ``model``: absolute path of a model file, or None for the shipped model.
     ``ground`` is a rect holding every spawn region, goal region and waypoint; ``seed`` ≥ 0
-    drives :func:`~jcrowd.scenario.spawning.spawn`; ``duration_s`` and ``fps`` are positive."""
+    drives :func:`~jcrowd.scenario.spawning.spawn`; ``duration_s`` and ``fps`` are positive;
+    ``layout`` the obstacles, walls and walkable area (:func:`~jcrowd.scenario.layout.check_layout`
+    checks the groups against them)."""
 
     source: str = "<code>"
     model: str | None = None
@@ -350,6 +253,7 @@ class Scenario:
     groups: tuple[Group, ...]
     camera: Camera
     lod: LodSettings = field(default_factory=LodSettings)
+    layout: Layout = field(default_factory=Layout)
 
     @property
     def num_agents(self) -> int:
@@ -382,6 +286,8 @@ class Scenario:
                 k = int(np.argmax(out))
                 key = f"groups[{i}].path.waypoints[{k}]"
                 require(not out.any(), key, f"a point {inside}", g.path.waypoints[k])
+        if not self.layout.empty:
+            check_layout(self.ground, self.layout, self.groups)
 
 
 def camera_at(camera: Camera, t: float) -> tuple[Float[np.ndarray, " 3"], Float[np.ndarray, " 3"]]:

@@ -13,9 +13,12 @@ from dataclasses import dataclass
 from typing import cast
 
 import numpy as np
+import shapely
 from jaxtyping import Bool, Float, Int
 
-from jcrowd.scenario.schema import Region, Scenario
+from jcrowd.scenario.geometry import Region
+from jcrowd.scenario.layout import free_space
+from jcrowd.scenario.schema import Scenario
 
 __all__ = ["LATERAL_JITTER_M", "Spawn", "spawn"]
 
@@ -81,6 +84,24 @@ def _offset_waypoints(
     return waypoints[None] + offsets[:, None, None] * miter
 
 
+def _sample_free(
+    region: Region, rng: np.random.Generator, n: int, free: shapely.Geometry | None
+) -> np.ndarray:
+    """``n`` points uniform over the part of ``region`` inside ``free`` (rejection sampling;
+    :func:`~jcrowd.scenario.layout.check_layout` made sure that part has area)."""
+    if free is None:
+        return region.sample(rng, n)
+    shapely.prepare(free)
+    kept: list[np.ndarray] = []
+    count = 0
+    while count < n:
+        p = region.sample(rng, max(2 * (n - count), 16))
+        p = p[shapely.contains_xy(free, p[:, 0], p[:, 1])]
+        kept.append(p)
+        count += len(p)
+    return np.concatenate(kept)[:n]
+
+
 def _loop_entry(waypoints: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Per point, the waypoint that ends the loop leg nearest to it (where it joins the loop)."""
     a = waypoints
@@ -138,6 +159,7 @@ def spawn(scenario: Scenario) -> Spawn:
     waypoint 0 first. Initial headings face each agent's first waypoint.
     """
     groups = scenario.groups
+    free = None if scenario.layout.empty else free_space(scenario.ground, scenario.layout)
     k_max = max(1 if g.path is None else len(g.path.waypoints) for g in groups)
     lo, hi = scenario.ground.bounds()
     streams = np.random.SeedSequence(scenario.seed).spawn(len(groups))
@@ -145,7 +167,7 @@ def spawn(scenario: Scenario) -> Spawn:
     for index, (group, stream) in enumerate(zip(groups, streams, strict=True)):
         rng = np.random.default_rng(stream)
         n = group.count
-        position = group.spawn.sample(rng, n)
+        position = _sample_free(group.spawn, rng, n, free)
         speed = rng.uniform(group.speed[0], group.speed[1], size=n)
         height = rng.uniform(group.height[0], group.height[1], size=n)
         if group.path is None:  # Group's check makes sure it then has a goal
