@@ -172,3 +172,30 @@ def test_gradients_are_finite_and_match_finite_differences():
         assert np.isfinite(float(g)) and abs(float(fd)) > 1e-6
         # Central differences at h = 1e-5 in float64: truncation ~h² and rounding ~1e-11.
         np.testing.assert_allclose(float(g), float(fd), rtol=1e-4)
+
+
+def test_a_block_of_the_crowd_against_the_whole_equals_the_whole():
+    """One device's interleaved block (agents k, k + 2, …), its candidates looked up by id in
+    the whole crowd's grid and its neighbours read from the whole crowd (``others``), gets the
+    rows the whole crowd's step gives those agents — the split step's contract."""
+    pos, desired, speed, radius, walls = _scene(40, 9, spread=4.0)
+    f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, walls)]
+    n = len(pos)
+    spec = grid_spec((-6.0, -6.0), (6.0, 6.0), 2.0)
+    cl = cell_list(spec, f32[0], jnp.ones(n, bool))
+    wall_ids = jnp.broadcast_to(jnp.arange(2, dtype=jnp.int32), (n, 2))
+    whole, _ = avoid(AvoidanceParams(), *f32[:4], candidates(spec, cl, f32[0]), f32[4], wall_ids)
+    for k in range(2):
+        ids = jnp.arange(k, n, 2, dtype=jnp.int32)
+        block, _ = avoid(
+            AvoidanceParams(),
+            f32[0][ids],
+            f32[1][ids],
+            f32[2][ids],
+            f32[3][ids],
+            candidates(spec, cl, f32[0][ids], ids),
+            f32[4],
+            wall_ids[ids],
+            others=(f32[0], f32[3]),
+        )
+        np.testing.assert_allclose(np.asarray(block), np.asarray(whole)[k::2], atol=1e-6)

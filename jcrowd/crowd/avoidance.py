@@ -122,20 +122,25 @@ def avoid(
     neighbours: Int[Array, "N M"],
     walls: Float[Array, "S 2 2"],
     wall_ids: Int[Array, "N W"],
+    others: tuple[Array, Array] | None = None,
 ) -> tuple[Float[Array, "N 2"], Float[Array, " N"]]:
     """Every agent's velocity (Eqs. 1–4) from its candidate neighbours and walls.
 
     ``neighbours`` holds agent ids (``N`` for none), ``wall_ids`` segment ids into ``walls``
-    (``S`` for none). Returns ``(velocity (N, 2), spacing (N,))``, what :func:`avoid_one` gives
-    agent by agent. Written on ``(N, M)`` arrays per coordinate rather than as a ``vmap`` of
-    :func:`avoid_one` over ``(M, 2)`` rows: XLA:CPU vectorizes loops over one contiguous axis,
-    and a minor axis of length 2 defeats that.
+    (``S`` for none). With ``others = (positions (P, 2), radii (P,))`` the ids index those
+    instead (``P`` for none): the agents stepped here are then a block of a larger crowd, as on
+    one device of several. Returns ``(velocity (N, 2), spacing (N,))``, what :func:`avoid_one`
+    gives agent by agent. Written on ``(N, M)`` arrays per coordinate rather than as a ``vmap``
+    of :func:`avoid_one` over ``(M, 2)`` rows: XLA:CPU vectorizes loops over one contiguous
+    axis, and a minor axis of length 2 defeats that.
     """
-    n, s = position.shape[0], walls.shape[0]
+    s = walls.shape[0]
     x, z = position[:, 0], position[:, 1]
-    px = jnp.concatenate([x, jnp.zeros((1,), x.dtype)])[neighbours]
-    pz = jnp.concatenate([z, jnp.zeros((1,), z.dtype)])[neighbours]
-    pr = jnp.concatenate([radius, jnp.zeros((1,), radius.dtype)])[neighbours]
+    all_pos, all_rad = (position, radius) if others is None else others
+    n = all_pos.shape[0]
+    px = jnp.concatenate([all_pos[:, 0], jnp.zeros((1,), x.dtype)])[neighbours]
+    pz = jnp.concatenate([all_pos[:, 1], jnp.zeros((1,), z.dtype)])[neighbours]
+    pr = jnp.concatenate([all_rad, jnp.zeros((1,), radius.dtype)])[neighbours]
     valid = neighbours < n
     dx, dz = x[:, None] - px, z[:, None] - pz  # from j to i
     dist = jnp.sqrt(dx * dx + dz * dz)

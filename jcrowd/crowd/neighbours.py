@@ -120,14 +120,19 @@ def cell_list(spec: GridSpec, position: Float[Array, "N 2"], alive: Bool[Array, 
     return CellList(slots, cell.astype(jnp.int32), overflow.astype(jnp.int32))
 
 
-def candidates(spec: GridSpec, cells: CellList, position: Float[Array, "N 2"]) -> Int[Array, "N M"]:
+def candidates(
+    spec: GridSpec, cells: CellList, position: Float[Array, "n 2"], ids: Array | None = None
+) -> Int[Array, "n M"]:
     """Each agent's candidate neighbours: the ids stored in the 3 × 3 cells around it.
 
-    Returns ``(N, 9·capacity)`` ids, ``N`` where a slot is empty, a cell lies outside the grid
-    or the id is the agent itself. Every agent within ``spec.cell`` of agent ``i`` (and stored)
-    is among its candidates.
+    ``position`` is the agents asked about: all the agents ``cells`` holds (``N``, the
+    default), or some of them whose ids in ``cells`` are ``ids`` (one device's block of a crowd
+    split over several). Returns ``(n, 9·capacity)`` ids, ``N`` where a slot is empty, a cell
+    lies outside the grid or the id is the agent itself. Every agent within ``spec.cell`` of an
+    agent (and stored) is among its candidates.
     """
-    n = position.shape[0]
+    n = cells.cell.shape[0]
+    own = jnp.arange(n, dtype=jnp.int32) if ids is None else ids.astype(jnp.int32)
     ix, iz = _cell_coords(spec, position)
     out = []
     for dx in (-1, 0, 1):
@@ -135,7 +140,6 @@ def candidates(spec: GridSpec, cells: CellList, position: Float[Array, "N 2"]) -
             jx, jz = ix + dx, iz + dz
             inside = (jx >= 0) & (jx < spec.shape[0]) & (jz >= 0) & (jz < spec.shape[1])
             c = jnp.where(inside, jx * spec.shape[1] + jz, 0)
-            ids = cells.slots[c]  # (N, capacity)
-            out.append(jnp.where(inside[:, None], ids, n))
-    ids = jnp.concatenate(out, axis=1)
-    return jnp.where(ids == jnp.arange(n, dtype=jnp.int32)[:, None], n, ids)
+            out.append(jnp.where(inside[:, None], cells.slots[c], n))  # (n, capacity) each
+    found = jnp.concatenate(out, axis=1)
+    return jnp.where(found == own[:, None], n, found)
