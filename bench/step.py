@@ -31,8 +31,12 @@ after another, so one device uses about one core. The full-detail rate is measur
 devices (each decodes its share of the agents); the naive baseline is one program, which XLA
 parallelizes over the cores inside each kernel.
 
-``python bench/step.py [--agents 1000,100000] [--cpu-devices K] [--json]``; appends a row to
-bench/RESULTS.md.
+With ``--avoid`` the plaza has ``[dynamics] avoid = true``: every agent's root is moved by the
+collision-free speed model among its neighbours (:mod:`jcrowd.crowd.steering`) — the whole step
+with crowd dynamics; the row says so.
+
+``python bench/step.py [--agents 1000,100000] [--cpu-devices K] [--avoid] [--json]``; appends a
+row to bench/RESULTS.md.
 """
 
 from __future__ import annotations
@@ -207,10 +211,17 @@ def roof_bytes(state: Any, frame: Any, refresh: int) -> int:
 
 
 def run_count(
-    model: MotionModel, n: int, steps: int, bw: float, min_pixels: float | None = None
+    model: MotionModel,
+    n: int,
+    steps: int,
+    bw: float,
+    min_pixels: float | None = None,
+    avoid: bool = False,
 ) -> dict[str, Any]:
     side = float(np.sqrt(10.0 * n))
     text = PLAZA.format(side=side + 2, inner=side, eye_z=-side / 2 - 0.5, n=n)
+    if avoid:
+        text += "\n[dynamics]\navoid = true\n"
     sim, state = prepare(parse_scenario(text, "bench-plaza.toml"), model)
     state = shard_state(state)  # one block of agents per device (unchanged on one device)
     if min_pixels is not None:  # every agent in view synthesized: no dots at all
@@ -246,6 +257,7 @@ def run_count(
         "state_bytes_per_agent": state_bytes / n,
         "roof_ms_per_step": roof_ms,
         "recompiles": fn._cache_size() - 1,
+        "crowding": int(frame.crowding),
         "_sim": (sim, state),
     }
 
@@ -257,6 +269,7 @@ def main() -> None:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--no-record", action="store_true")
     ap.add_argument("--cpu-devices", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--avoid", action="store_true", help="crowd dynamics on ([dynamics] avoid)")
     args = ap.parse_args()
     use_cpu_devices(args.cpu_devices)  # before JAX starts its backend
     counts = [int(v) for v in args.agents.split(",")]
@@ -266,7 +279,7 @@ def main() -> None:
     full_rate = 0.0
     for n in counts:
         steps = args.steps if n < 1_000_000 else max(3, args.steps // 4)
-        row = run_count(model, n, steps, bw)
+        row = run_count(model, n, steps, bw, avoid=args.avoid)
         sim, state = row.pop("_sim")
         naive[str(n)] = naive_ms(model, n, 3)
         speedup[str(n)] = naive[str(n)] / row["ms_per_step"]
@@ -275,7 +288,7 @@ def main() -> None:
         rows.append(row)
         print(f"{n:,} agents: {row['ms_per_step']:.1f} ms/step", file=sys.stderr)
         if n == 100_000:  # the same plaza with every agent in view synthesized
-            every = run_count(model, n, steps, bw, min_pixels=0.0)
+            every = run_count(model, n, steps, bw, min_pixels=0.0, avoid=args.avoid)
             every.pop("_sim")
             rows.append(every)
     out = {
@@ -288,13 +301,15 @@ def main() -> None:
         "bandwidth_gbs": bw,
         "device": str(jax.devices()[0].platform),
         "devices": len(jax.devices()),
+        "avoid": args.avoid,
         "machine": machine(),
         "jax": jax.__version__,
     }
     text = _table(out)
     report(
         "step",
-        f"{out['machine']}, jax {out['jax']}, {out['device']} × {out['devices']}",
+        f"{out['machine']}, jax {out['jax']}, {out['device']} × {out['devices']}"
+        + (", avoidance on" if args.avoid else ""),
         out,
         text,
         args.json,

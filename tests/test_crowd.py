@@ -475,7 +475,7 @@ def test_coarsest_level_cached_cores_match_direct_decode_across_clip_changes(mod
 def test_waypoint_pick_by_selects_or_gather_equals_indexing(model, k, monkeypatch):
     """Both ways of reading each agent's current waypoint (selects up to SELECT_WAYPOINTS,
     a gather beyond) equal NumPy fancy indexing, exactly (no arithmetic)."""
-    import jcrowd.crowd.stepping as crowd
+    import jcrowd.crowd.steering as steering
 
     _, state = _sim(model, count=10)
     rng = np.random.default_rng(k)
@@ -484,6 +484,6 @@ def test_waypoint_pick_by_selects_or_gather_equals_indexing(model, k, monkeypatc
     state = eqx.tree_at(lambda s: s.waypoints, state, wps)
     want = np.asarray(wps)[np.arange(10), np.asarray(wp)]
     for limit in (0, 100):  # 0: always gather; 100: always selects
-        monkeypatch.setattr(crowd, "SELECT_WAYPOINTS", limit)
-        tx, tz = jax.jit(crowd._waypoint_xz)(state, wp)
+        monkeypatch.setattr(steering, "SELECT_WAYPOINTS", limit)
+        tx, tz = jax.jit(steering.waypoint_xz)(state.waypoints, wp)
         np.testing.assert_array_equal(np.stack([tx, tz], axis=1), want)

@@ -44,6 +44,7 @@ from jcrowd.crowd.neighbours import GridSpec as GridSpec
 from jcrowd.crowd.neighbours import candidates as candidates
 from jcrowd.crowd.neighbours import cell_list as cell_list
 from jcrowd.crowd.neighbours import grid_spec as grid_spec
+from jcrowd.crowd.schedule import schedule as schedule
 from jcrowd.crowd.simulate import Simulation as Simulation
 from jcrowd.crowd.simulate import agent_mesh as agent_mesh
 from jcrowd.crowd.simulate import agent_order as agent_order
@@ -55,11 +56,17 @@ from jcrowd.crowd.simulate import prepare as prepare
 from jcrowd.crowd.simulate import shard_state as shard_state
 from jcrowd.crowd.simulate import step_compiler_options as step_compiler_options
 from jcrowd.crowd.simulate import thresholds_for as thresholds_for
+from jcrowd.crowd.state import DEFAULT_RADIUS as DEFAULT_RADIUS
 from jcrowd.crowd.state import CrowdState as CrowdState
 from jcrowd.crowd.state import Frame as Frame
+from jcrowd.crowd.state import StepConfig as StepConfig
 from jcrowd.crowd.state import init_state as init_state
 from jcrowd.crowd.state import refresh_far_cores as refresh_far_cores
-from jcrowd.crowd.stepping import StepConfig as StepConfig
+from jcrowd.crowd.steering import TURN_RATE as TURN_RATE
+from jcrowd.crowd.steering import aim_point as aim_point
+from jcrowd.crowd.steering import steer as steer
+from jcrowd.crowd.steering import turn_towards as turn_towards
+from jcrowd.crowd.steering import waypoint_xz as waypoint_xz
 from jcrowd.crowd.stepping import bucket_chunk as bucket_chunk
 from jcrowd.crowd.stepping import decode_bucket as decode_bucket
 from jcrowd.crowd.stepping import default_capacities as default_capacities

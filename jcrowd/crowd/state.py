@@ -1,11 +1,14 @@
-"""The crowd's state and the frame a step returns (:mod:`jcrowd.crowd.stepping` advances them).
+"""The crowd's state, the step's settings and the frame a step returns.
 
 :class:`CrowdState` holds every agent's state with the agent axis leading (so one
-``PartitionSpec("agents")`` shards all of it); :class:`Frame` is what a renderer or a recorder
+``PartitionSpec("agents")`` shards all of it); :class:`StepConfig` the static settings
+:mod:`jcrowd.crowd.stepping` is compiled with; :class:`Frame` is what a renderer or a recorder
 reads from one step; :func:`init_state` builds the first state from spawned agents.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import equinox as eqx
 import jax
@@ -14,9 +17,89 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from jcrowd.crowd.clips import CrowdModel, next_clips
+from jcrowd.crowd.neighbours import GridSpec
 from jcrowd.crowd.synthesis import clip_core
+from jcrowd.errors import JcrowdError
 
-__all__ = ["CrowdState", "Frame", "init_state", "refresh_far_cores"]
+__all__ = ["DEFAULT_RADIUS", "CrowdState", "Frame", "StepConfig", "init_state", "refresh_far_cores"]
+
+DEFAULT_RADIUS = 0.2
+"""Body radius (m) of an agent for the crowd dynamics (JuPedSim's default)."""
+
+
+@dataclass(frozen=True)
+class StepConfig:
+    """Static settings of the step (changing one compiles a new step).
+
+    Attributes:
+        capacities: agents per level (finest first); the last usually covers every agent.
+        thresholds: distances (m) past which an agent is at least level i + 1.
+        hysteresis: band (m) round each threshold inside which the level does not change.
+        blend_max_level: levels ≤ this blend clips; coarser ones switch at the frame.
+        refresh: clips chosen per step at most (0: ``N / 32 + 64``, above the rate at which
+            1.1 s cycles end at 30 steps per second, N / 33; :func:`jcrowd.crowd.simulate.prepare`
+            sets it from the frame rate and the model's shortest cycle).
+        reach: a waypoint within this distance (m) counts as reached.
+        importance: ``"distance"`` (nearer first) or ``"pixels"`` (taller on screen first).
+        min_reliability: below this ρ the next clip is averaged with the nearest sample's clip.
+        foot_lock: near levels (≤ ``blend_max_level``) move the root so the stance foot (the
+            lowest foot joint) does not slide; the decoded root velocity is used otherwise.
+        min_pixels: agents whose projected height is below this are not synthesized (root
+            only, drawn as dots); 0 synthesizes every agent in the frustum.
+        chunk: a level's bucket is decoded in chunks of at least this many slots (at most 8
+            per level), only as many chunks as hold agents (a capacity is a maximum, not a
+            cost; see :func:`decode_bucket`).
+        krige_budget: next clips kriged per step at most, for agents being synthesized (0:
+            ``Σ capacities / 32 + 64``; ``prepare`` sets it like ``refresh`` for the agents
+            the capacities hold); the others play the nearest captured cycle
+            (:func:`jcrowd.crowd.clips.next_clips_lod`).
+        avoid: the crowd dynamics drive the roots (:mod:`jcrowd.crowd.steering`): agents
+            avoid each other, the root is the simulated position, clips follow the velocity
+            and foot locking is off (it would move the root off the simulated position).
+        grid: the dynamics' neighbour grid (required with ``avoid``).
+    """
+
+    capacities: tuple[int, ...]
+    thresholds: tuple[float, ...]
+    hysteresis: float = 2.0
+    blend_max_level: int = 1
+    refresh: int = 0
+    reach: float = 2.0
+    importance: str = "distance"
+    min_reliability: float = 0.5
+    foot_lock: bool = True
+    min_pixels: float = 3.0
+    chunk: int = 64
+    krige_budget: int = 0
+    avoid: bool = False
+    grid: GridSpec | None = None
+
+    def check(self, levels: int) -> None:
+        """Raise :class:`JcrowdError` unless the settings fit a model with ``levels`` levels."""
+        if len(self.capacities) != levels or any(c < 1 for c in self.capacities):
+            raise JcrowdError(
+                f"lod.capacities: expected {levels} positive integers (one per model level), "
+                f"found {list(self.capacities)}"
+            )
+        if len(self.thresholds) != levels - 1:
+            raise JcrowdError(
+                f"lod.thresholds: expected {levels - 1} distances for a {levels}-level model, "
+                f"found {list(self.thresholds)}"
+            )
+        if self.chunk < 1:
+            raise JcrowdError(f"lod.chunk: expected a positive integer, found {self.chunk}")
+        for name in ("refresh", "krige_budget"):
+            if getattr(self, name) < 0:
+                raise JcrowdError(
+                    f"lod.{name}: expected a non-negative integer (0: default), "
+                    f"found {getattr(self, name)}"
+                )
+        if self.avoid and self.grid is None:
+            raise JcrowdError("dynamics: expected a neighbour grid with avoid on, found none")
+        if self.importance not in ("distance", "pixels"):
+            raise JcrowdError(
+                f"lod.importance: expected 'distance' or 'pixels', found {self.importance!r}"
+            )
 
 
 class CrowdState(eqx.Module):
@@ -51,6 +134,9 @@ class CrowdState(eqx.Module):
     num_waypoints: Int[Array, " N"]
     loop: Bool[Array, " N"]
     waypoint: Int[Array, " N"]  # index of the waypoint being walked to
+    vx: Float[Array, " N"]  # simulated velocity (m/s) when the step avoids (else the spawn one)
+    vz: Float[Array, " N"]
+    radius: Float[Array, " N"]  # m, the body disc the crowd dynamics keeps apart
     # Devices whose blocks hold the agents interleaved (jcrowd.crowd.simulate.shard_state): with K
     # > 1 position p of every array is agent agent_order(N, K)[p], not agent p.
     interleave: int = eqx.field(static=True, default=1)
@@ -88,7 +174,8 @@ class Frame(eqx.Module):
     level (``L``: not synthesized); ``dots`` marks agents in view but not synthesized (below
     ``min_pixels`` or beyond the budget): a renderer draws them at their root. ``overflow``
     counts agents placed coarser than their distance allows (dots by budget included),
-    ``deferred`` agents whose next-clip choice waits a step.
+    ``deferred`` agents whose next-clip choice waits a step, ``crowding`` agents the
+    dynamics' neighbour grid could not hold (0 when the step does not avoid).
     """
 
     slots: tuple[Int[Array, " C"], ...]
@@ -98,6 +185,7 @@ class Frame(eqx.Module):
     dots: Bool[Array, " N"]
     overflow: Int[Array, ""]
     deferred: Int[Array, ""]
+    crowding: Int[Array, ""]
 
 
 def init_state(
@@ -112,7 +200,8 @@ def init_state(
     ``refresh`` budget, and leave a backlog of deferred choices.)
 
     ``spawn`` holds ``position (N, 2)``, ``heading``, ``height``, ``speed`` ``(N,)``,
-    ``waypoints (N, K, 2)``, ``num_waypoints (N,)``, ``loop (N,)``.
+    ``waypoints (N, K, 2)``, ``num_waypoints (N,)``, ``loop (N,)``, and optionally ``radius``
+    ``(N,)`` (default :data:`DEFAULT_RADIUS`).
     """
     n = spawn["position"].shape[0]
     heading = jnp.asarray(spawn["heading"], jnp.float32)
@@ -154,6 +243,9 @@ def init_state(
         num_waypoints=jnp.asarray(spawn["num_waypoints"], jnp.int32),
         loop=jnp.asarray(spawn["loop"], bool),
         waypoint=jnp.zeros(n, jnp.int32),
+        vx=speed * jnp.sin(heading),
+        vz=speed * jnp.cos(heading),
+        radius=jnp.asarray(spawn.get("radius", np.full(n, DEFAULT_RADIUS)), jnp.float32),
     )
 
 

@@ -28,6 +28,11 @@ phase-aligned reading is taken: over the old cycle's second half the pose eases 
 from the old clip to the new clip *at the same phase*, and at the cycle end the new clip
 continues from phase 0. Far levels switch at the cycle end without blending.
 
+With ``StepConfig.avoid`` (``[dynamics] avoid = true``) the crowd dynamics move the roots
+instead of step 2's decoded velocity and step 3's dead reckoning (:mod:`jcrowd.crowd.steering`:
+the collision-free speed model among neighbours, the body turning towards the velocity), the
+clips of step 4 follow the simulated velocity, and foot locking is off.
+
 Agents at the end of a non-looped path stop being ``alive`` (they leave the crowd; the count is
 in the frame). Everything has a static shape; no host round trip inside a step.
 """
@@ -35,15 +40,14 @@ in the frame). Everything has a static shape; no host round trip inside a step.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Int
+from jaxtyping import Array, Int
 
-from jcrowd.crowd.clips import CrowdModel, local_to_world, next_clips_lod
+from jcrowd.crowd.clips import CrowdModel, local_to_world
 from jcrowd.crowd.lod import (
     CameraView,
     assign_buckets,
@@ -51,85 +55,19 @@ from jcrowd.crowd.lod import (
     in_frustum,
     screen_height_px,
 )
-from jcrowd.crowd.state import CrowdState, Frame, refresh_far_cores
+from jcrowd.crowd.neighbours import GridSpec
+from jcrowd.crowd.schedule import schedule
+from jcrowd.crowd.state import CrowdState, Frame, StepConfig, refresh_far_cores
+from jcrowd.crowd.steering import steer, turn_towards, waypoint_xz
 from jcrowd.crowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
-from jcrowd.errors import JcrowdError
 from jcrowd.motion.fastmath import sincos
 
 __all__ = [
-    "StepConfig",
     "bucket_chunk",
     "decode_bucket",
     "default_capacities",
     "step",
 ]
-
-
-@dataclass(frozen=True)
-class StepConfig:
-    """Static settings of the step (changing one compiles a new step).
-
-    Attributes:
-        capacities: agents per level (finest first); the last usually covers every agent.
-        thresholds: distances (m) past which an agent is at least level i + 1.
-        hysteresis: band (m) round each threshold inside which the level does not change.
-        blend_max_level: levels ≤ this blend clips; coarser ones switch at the frame.
-        refresh: clips chosen per step at most (0: ``N / 32 + 64``, above the rate at which
-            1.1 s cycles end at 30 steps per second, N / 33; :func:`jcrowd.crowd.simulate.prepare`
-            sets it from the frame rate and the model's shortest cycle).
-        reach: a waypoint within this distance (m) counts as reached.
-        importance: ``"distance"`` (nearer first) or ``"pixels"`` (taller on screen first).
-        min_reliability: below this ρ the next clip is averaged with the nearest sample's clip.
-        foot_lock: near levels (≤ ``blend_max_level``) move the root so the stance foot (the
-            lowest foot joint) does not slide; the decoded root velocity is used otherwise.
-        min_pixels: agents whose projected height is below this are not synthesized (root
-            only, drawn as dots); 0 synthesizes every agent in the frustum.
-        chunk: a level's bucket is decoded in chunks of at least this many slots (at most 8
-            per level), only as many chunks as hold agents (a capacity is a maximum, not a
-            cost; see :func:`decode_bucket`).
-        krige_budget: next clips kriged per step at most, for agents being synthesized (0:
-            ``Σ capacities / 32 + 64``; ``prepare`` sets it like ``refresh`` for the agents
-            the capacities hold); the others play the nearest captured cycle
-            (:func:`jcrowd.crowd.clips.next_clips_lod`).
-    """
-
-    capacities: tuple[int, ...]
-    thresholds: tuple[float, ...]
-    hysteresis: float = 2.0
-    blend_max_level: int = 1
-    refresh: int = 0
-    reach: float = 2.0
-    importance: str = "distance"
-    min_reliability: float = 0.5
-    foot_lock: bool = True
-    min_pixels: float = 3.0
-    chunk: int = 64
-    krige_budget: int = 0
-
-    def check(self, levels: int) -> None:
-        """Raise :class:`JcrowdError` unless the settings fit a model with ``levels`` levels."""
-        if len(self.capacities) != levels or any(c < 1 for c in self.capacities):
-            raise JcrowdError(
-                f"lod.capacities: expected {levels} positive integers (one per model level), "
-                f"found {list(self.capacities)}"
-            )
-        if len(self.thresholds) != levels - 1:
-            raise JcrowdError(
-                f"lod.thresholds: expected {levels - 1} distances for a {levels}-level model, "
-                f"found {list(self.thresholds)}"
-            )
-        if self.chunk < 1:
-            raise JcrowdError(f"lod.chunk: expected a positive integer, found {self.chunk}")
-        for name in ("refresh", "krige_budget"):
-            if getattr(self, name) < 0:
-                raise JcrowdError(
-                    f"lod.{name}: expected a non-negative integer (0: default), "
-                    f"found {getattr(self, name)}"
-                )
-        if self.importance not in ("distance", "pixels"):
-            raise JcrowdError(
-                f"lod.importance: expected 'distance' or 'pixels', found {self.importance!r}"
-            )
 
 
 BUDGET_FINEST = 256
@@ -284,9 +222,19 @@ def _dead_reckoning(
 
 
 def step(
-    cm: CrowdModel, config: StepConfig, state: CrowdState, view: CameraView, dt: Array
+    cm: CrowdModel,
+    config: StepConfig,
+    state: CrowdState,
+    view: CameraView,
+    dt: Array,
+    gather: Callable[[Array], Array] | None = None,
+    ids: Array | None = None,
 ) -> tuple[CrowdState, Frame]:
-    """Advance the crowd by ``dt`` seconds and return the frame at the step's start."""
+    """Advance the crowd by ``dt`` seconds and return the frame at the step's start.
+
+    ``gather`` and ``ids``: on one device of several, how the dynamics see the whole crowd
+    (:func:`jcrowd.crowd.steering.steer`); unused without ``config.avoid``.
+    """
     nlev = len(cm.decoders.levels)
     dt = jnp.asarray(dt, jnp.float32)
     centre = (state.x, 0.55 * state.height, state.z)
@@ -305,7 +253,7 @@ def step(
     for lv, (slots, ok) in enumerate(zip(buckets.slots, buckets.valid, strict=True)):
         safe = jnp.where(ok, slots, 0)
         near = lv <= config.blend_max_level
-        lock = near and config.foot_lock
+        lock = near and config.foot_lock and not config.avoid
         cached = lv == nlev - 1 and not near
         if cached:
             state = refresh_far_cores(cm, state, safe, ok)
@@ -323,14 +271,28 @@ def step(
         dz = dz.at[slots].set(pos_l[:, 1], mode="drop")
 
     alive = state.alive
+    crowding = jnp.zeros((), jnp.int32)
+    if config.avoid:
+        grid = cast(GridSpec, config.grid)  # StepConfig.check requires it with avoid
+        tx, tz = waypoint_xz(state.waypoints, state.waypoint)
+        vx, vz, crowding = steer(
+            grid, state.x, state.z, tx, tz, state.speed, state.radius, alive, gather, ids
+        )
+        dx, dz = vx * dt, vz * dt
+        heading = turn_towards(state.heading, vx, vz, dt)
+    else:  # the velocity is the dynamics' output; without them it stays as it was
+        vx, vz = state.vx, state.vz
+        heading = state.heading + dyaw
     moved = (
         jnp.where(alive, state.x + dx, state.x),
         jnp.where(alive, state.z + dz, state.z),
-        jnp.where(alive, state.heading + dyaw, state.heading),
+        jnp.where(alive, heading, state.heading),
         jnp.where(alive, state.tau + dtau, state.tau),
+        vx,
+        vz,
     )
-    state = eqx.tree_at(lambda s: (s.x, s.z, s.heading, s.tau), state, moved)
-    state, deferred = _schedule(cm, config, state, buckets.level < nlev)
+    state = eqx.tree_at(lambda s: (s.x, s.z, s.heading, s.tau, s.vx, s.vz), state, moved)
+    state, deferred = schedule(cm, config, state, buckets.level < nlev)
     state = eqx.tree_at(lambda s: s.level, state, buckets.level)
     frame = Frame(
         buckets.slots,
@@ -340,99 +302,6 @@ def step(
         visible & (buckets.level == nlev),
         buckets.overflow + buckets.unplaced,
         deferred,
+        crowding,
     )
     return state, frame
-
-
-SELECT_WAYPOINTS = 8
-"""Up to this many waypoints per agent, the current one is picked by selects (vectorized);
-longer lists are gathered."""
-
-
-def _waypoint_xz(state: CrowdState, wp: Int[Array, " N"]) -> tuple[Array, Array]:
-    """The ``(x, z)`` of each agent's waypoint ``wp``."""
-    k = state.waypoints.shape[1]
-    if k > SELECT_WAYPOINTS:
-        row = jnp.take_along_axis(state.waypoints, wp[:, None, None], axis=1)[:, 0]
-        return row[:, 0], row[:, 1]
-    tx, tz = state.waypoints[:, 0, 0], state.waypoints[:, 0, 1]
-    for j in range(1, k):
-        tx = jnp.where(wp == j, state.waypoints[:, j, 0], tx)
-        tz = jnp.where(wp == j, state.waypoints[:, j, 1], tz)
-    return tx, tz
-
-
-def _schedule(
-    cm: CrowdModel, config: StepConfig, state: CrowdState, synthesized: Bool[Array, " N"]
-) -> tuple[CrowdState, Array]:
-    """Waypoints, next-clip choice at mid-cycle (bounded per step) and clip hand-over.
-
-    Agents synthesized this step get a kriged next clip, the others the nearest captured cycle
-    to the controls they aim at (:func:`jcrowd.crowd.clips.next_clips_lod`).
-    """
-    n = state.num_agents
-    last = float(cm.frames - 1)
-    tx, tz = _waypoint_xz(state, state.waypoint)
-    near = (tx - state.x) ** 2 + (tz - state.z) ** 2 < config.reach**2
-    reached = state.alive & near
-    wp = state.waypoint + reached.astype(jnp.int32)
-    done = wp >= state.num_waypoints
-    wp = jnp.where(done & state.loop, 0, jnp.minimum(wp, state.num_waypoints - 1))
-    alive = state.alive & ~(done & ~state.loop)
-
-    need = alive & ~state.has_next & (state.tau >= last / 2)
-    (idx,) = jnp.nonzero(need, size=min(config.refresh or n // 32 + 64, n), fill_value=n)
-    safe = jnp.where(idx < n, idx, 0)
-    origin = jnp.stack(
-        [state.origin_x[safe], state.origin_z[safe], state.origin_heading[safe]], axis=1
-    )
-    budget = config.krige_budget or sum(config.capacities) // 32 + 64
-    c, a, dur, done = next_clips_lod(
-        cm,
-        origin,
-        state.control[safe, state.current[safe]],
-        state.waypoints[safe, wp[safe]],
-        state.speed[safe],
-        state.height[safe],
-        config.min_reliability,
-        synthesized[safe] & (idx < n),
-        budget,
-    )
-    idx = jnp.where(done, idx, n)  # choices beyond the kriging budget wait a step
-    slot = 1 - state.current[safe]
-    control = state.control.at[idx, slot].set(c, mode="drop")
-    mix = state.mix.at[idx, slot].set(a, mode="drop")
-    duration = state.duration.at[idx, slot].set(dur, mode="drop")
-    has_next = state.has_next.at[idx].set(True, mode="drop")
-    deferred = jnp.sum(need, dtype=jnp.int32) - jnp.sum(idx < n, dtype=jnp.int32)
-
-    wrap = state.tau >= last
-    take = wrap & has_next
-    return (
-        CrowdState(
-            x=state.x,
-            z=state.z,
-            heading=state.heading,
-            tau=jnp.where(wrap, state.tau - last, state.tau),
-            control=control,
-            mix=mix,
-            duration=duration,
-            current=jnp.where(take, 1 - state.current, state.current),
-            has_next=has_next & ~take,
-            origin_x=jnp.where(wrap, state.x, state.origin_x),
-            origin_z=jnp.where(wrap, state.z, state.origin_z),
-            origin_heading=jnp.where(wrap, state.heading, state.origin_heading),
-            level=state.level,
-            far_core=state.far_core,
-            far_valid=state.far_valid & ~take,
-            alive=alive,
-            height=state.height,
-            speed=state.speed,
-            waypoints=state.waypoints,
-            num_waypoints=state.num_waypoints,
-            loop=state.loop,
-            waypoint=wp,
-            interleave=state.interleave,
-        ),
-        deferred,
-    )

@@ -24,6 +24,7 @@ from jcrowd.scenario.parse import parse_scenario as parse_scenario
 from jcrowd.scenario.schema import DEFAULT_THRESHOLDS_M as DEFAULT_THRESHOLDS_M
 from jcrowd.scenario.schema import Camera as Camera
 from jcrowd.scenario.schema import CameraKey as CameraKey
+from jcrowd.scenario.schema import DynamicsSettings as DynamicsSettings
 from jcrowd.scenario.schema import Group as Group
 from jcrowd.scenario.schema import LodSettings as LodSettings
 from jcrowd.scenario.schema import Path as Path

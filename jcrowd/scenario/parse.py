@@ -23,6 +23,7 @@ from jcrowd.scenario.layout import Layout, Wall
 from jcrowd.scenario.schema import (
     Camera,
     CameraKey,
+    DynamicsSettings,
     Group,
     LodSettings,
     Path,
@@ -44,6 +45,7 @@ _TOP = (
     "obstacles",
     "walls",
     "walkable",
+    "dynamics",
 )
 _GROUP = ("name", "count", "spawn", "path", "goal", "speed", "height", "color")
 _CAMERA = ("eye", "target", "keys", "fov", "width", "height", "near", "far")
@@ -222,6 +224,11 @@ def parse_scenario(
         camera=r.camera(doc["camera"]),
         lod=r.build("lod", LodSettings, **{_LOD[k]: v for k, v in lod.items()}),
         layout=r.layout(doc),
+        dynamics=r.build(
+            "dynamics",
+            DynamicsSettings,
+            **r.table(doc.get("dynamics", {}), "dynamics", ("avoid", "radius")),
+        ),
     )
 
 

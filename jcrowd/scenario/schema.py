@@ -46,6 +46,7 @@ __all__ = [
     "DEFAULT_THRESHOLDS_M",
     "Camera",
     "CameraKey",
+    "DynamicsSettings",
     "Group",
     "LodSettings",
     "Path",
@@ -236,6 +237,22 @@ class LodSettings:
         object.__setattr__(self, "min_pixels", float(m))
 
 
+@dataclass(frozen=True, eq=False)
+class DynamicsSettings:
+    """Crowd dynamics (``[dynamics]``). ``avoid``: agents avoid each other (the collision-free
+    speed model drives every root; off: each walks its clips towards its waypoints as if alone).
+    ``radius``: the body disc kept clear around each agent (m, 0.1–0.4)."""
+
+    avoid: bool = False
+    radius: float = 0.2
+
+    def __post_init__(self) -> None:
+        require(isinstance(self.avoid, bool), "avoid", "true or false", self.avoid)
+        r = self.radius
+        require(real(r) and 0.1 <= r <= 0.4, "radius", "a radius in [0.1, 0.4] (m)", r)
+        object.__setattr__(self, "radius", float(r))
+
+
 @dataclass(frozen=True, eq=False, kw_only=True)
 class Scenario:
     """A whole scenario. ``model``: absolute path of a model file, or None for the shipped model.
@@ -254,6 +271,7 @@ class Scenario:
     camera: Camera
     lod: LodSettings = field(default_factory=LodSettings)
     layout: Layout = field(default_factory=Layout)
+    dynamics: DynamicsSettings = field(default_factory=DynamicsSettings)
 
     @property
     def num_agents(self) -> int:

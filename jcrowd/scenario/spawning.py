@@ -102,6 +102,41 @@ def _sample_free(
     return np.concatenate(kept)[:n]
 
 
+SPREAD_TRIES = 50
+"""Draws per agent before a start position that touches another agent's disc is accepted."""
+
+
+def _spread(
+    region: Region,
+    rng: np.random.Generator,
+    n: int,
+    free: shapely.Geometry | None,
+    gap: float,
+    placed: dict[tuple[int, int], list[np.ndarray]],
+) -> np.ndarray:
+    """``n`` start positions in ``region`` at least ``gap`` from each other and from the
+    positions in ``placed`` (a hash of ``gap``-sized cells, updated), as :func:`spawn` says."""
+    out = np.empty((n, 2))
+    pool, k = np.empty((0, 2)), 0
+    for i in range(n):
+        for _ in range(SPREAD_TRIES):
+            if k == len(pool):
+                pool, k = _sample_free(region, rng, 64, free), 0
+            p, k = pool[k], k + 1
+            cx, cz = int(p[0] // gap), int(p[1] // gap)
+            near = [
+                q
+                for dx in (-1, 0, 1)
+                for dz in (-1, 0, 1)
+                for q in placed.get((cx + dx, cz + dz), ())
+            ]
+            if not near or np.min(np.sum((np.asarray(near) - p) ** 2, axis=1)) >= gap * gap:
+                break
+        out[i] = p
+        placed.setdefault((cx, cz), []).append(p)
+    return out
+
+
 def _loop_entry(waypoints: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Per point, the waypoint that ends the loop leg nearest to it (where it joins the loop)."""
     a = waypoints
@@ -157,9 +192,17 @@ def spawn(scenario: Scenario) -> Spawn:
     waypoint; a looped path is joined at the end of the leg nearest the spawn point (its
     waypoints rotated so that one comes first), so agents spread over a loop do not all walk to
     waypoint 0 first. Initial headings face each agent's first waypoint.
+
+    With ``[dynamics] avoid`` on, agents start at least two radii apart (their discs do not
+    overlap): each position is drawn again, up to :data:`SPREAD_TRIES` times, while it falls
+    within that distance of an agent placed before it (earlier groups first), then kept as
+    drawn — in a region packed close to the limit a few may start touching, and the dynamics
+    push them apart within the first steps.
     """
     groups = scenario.groups
     free = None if scenario.layout.empty else free_space(scenario.ground, scenario.layout)
+    gap = 2 * scenario.dynamics.radius if scenario.dynamics.avoid else 0.0
+    placed: dict[tuple[int, int], list[np.ndarray]] = {}
     k_max = max(1 if g.path is None else len(g.path.waypoints) for g in groups)
     lo, hi = scenario.ground.bounds()
     streams = np.random.SeedSequence(scenario.seed).spawn(len(groups))
@@ -167,7 +210,10 @@ def spawn(scenario: Scenario) -> Spawn:
     for index, (group, stream) in enumerate(zip(groups, streams, strict=True)):
         rng = np.random.default_rng(stream)
         n = group.count
-        position = _sample_free(group.spawn, rng, n, free)
+        if gap > 0:
+            position = _spread(group.spawn, rng, n, free, gap, placed)
+        else:
+            position = _sample_free(group.spawn, rng, n, free)
         speed = rng.uniform(group.speed[0], group.speed[1], size=n)
         height = rng.uniform(group.height[0], group.height[1], size=n)
         if group.path is None:  # Group's check makes sure it then has a goal

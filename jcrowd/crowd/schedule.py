@@ -1,0 +1,111 @@
+"""Clip scheduling in the crowd step: waypoints, the next gait cycle, and the hand-over.
+
+Part 4 of :mod:`jcrowd.crowd.stepping`'s step (paper 000 §5.2): an agent reaching its waypoint
+heads for the next (or leaves the crowd at the end of an open path); half way through a cycle it
+chooses the next one — kriged for agents being synthesized, the nearest captured cycle for the
+rest (:func:`jcrowd.crowd.clips.next_clips_lod`), at most ``refresh`` per step — aiming at its
+waypoint, or with the crowd dynamics on, along its simulated velocity
+(:func:`jcrowd.crowd.steering.aim_point`); at the cycle's end the next clip takes over.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Bool
+
+from jcrowd.crowd.clips import CrowdModel, next_clips_lod
+from jcrowd.crowd.state import CrowdState, StepConfig
+from jcrowd.crowd.steering import aim_point, waypoint_xz
+
+__all__ = ["schedule"]
+
+
+def schedule(
+    cm: CrowdModel, config: StepConfig, state: CrowdState, synthesized: Bool[Array, " N"]
+) -> tuple[CrowdState, Array]:
+    """Waypoints, next-clip choice at mid-cycle (bounded per step) and clip hand-over.
+
+    Agents synthesized this step get a kriged next clip, the others the nearest captured cycle
+    to the controls they aim at (:func:`jcrowd.crowd.clips.next_clips_lod`).
+    """
+    n = state.num_agents
+    last = float(cm.frames - 1)
+    tx, tz = waypoint_xz(state.waypoints, state.waypoint)
+    near = (tx - state.x) ** 2 + (tz - state.z) ** 2 < config.reach**2
+    reached = state.alive & near
+    wp = state.waypoint + reached.astype(jnp.int32)
+    done = wp >= state.num_waypoints
+    wp = jnp.where(done & state.loop, 0, jnp.minimum(wp, state.num_waypoints - 1))
+    alive = state.alive & ~(done & ~state.loop)
+
+    need = alive & ~state.has_next & (state.tau >= last / 2)
+    (idx,) = jnp.nonzero(need, size=min(config.refresh or n // 32 + 64, n), fill_value=n)
+    safe = jnp.where(idx < n, idx, 0)
+    origin = jnp.stack(
+        [state.origin_x[safe], state.origin_z[safe], state.origin_heading[safe]], axis=1
+    )
+    budget = config.krige_budget or sum(config.capacities) // 32 + 64
+    if config.avoid:  # the next cycle follows the simulated velocity, not the waypoint
+        aim = aim_point(
+            state.x[safe],
+            state.z[safe],
+            state.vx[safe],
+            state.vz[safe],
+            state.heading[safe],
+            1.5 * cm.cycle_seconds,
+        )
+        pace = jnp.sqrt(state.vx[safe] ** 2 + state.vz[safe] ** 2)
+    else:
+        aim, pace = state.waypoints[safe, wp[safe]], state.speed[safe]
+    c, a, dur, done = next_clips_lod(
+        cm,
+        origin,
+        state.control[safe, state.current[safe]],
+        aim,
+        pace,
+        state.height[safe],
+        config.min_reliability,
+        synthesized[safe] & (idx < n),
+        budget,
+    )
+    idx = jnp.where(done, idx, n)  # choices beyond the kriging budget wait a step
+    slot = 1 - state.current[safe]
+    control = state.control.at[idx, slot].set(c, mode="drop")
+    mix = state.mix.at[idx, slot].set(a, mode="drop")
+    duration = state.duration.at[idx, slot].set(dur, mode="drop")
+    has_next = state.has_next.at[idx].set(True, mode="drop")
+    deferred = jnp.sum(need, dtype=jnp.int32) - jnp.sum(idx < n, dtype=jnp.int32)
+
+    wrap = state.tau >= last
+    take = wrap & has_next
+    return (
+        CrowdState(
+            x=state.x,
+            z=state.z,
+            heading=state.heading,
+            tau=jnp.where(wrap, state.tau - last, state.tau),
+            control=control,
+            mix=mix,
+            duration=duration,
+            current=jnp.where(take, 1 - state.current, state.current),
+            has_next=has_next & ~take,
+            origin_x=jnp.where(wrap, state.x, state.origin_x),
+            origin_z=jnp.where(wrap, state.z, state.origin_z),
+            origin_heading=jnp.where(wrap, state.heading, state.origin_heading),
+            level=state.level,
+            far_core=state.far_core,
+            far_valid=state.far_valid & ~take,
+            alive=alive,
+            height=state.height,
+            speed=state.speed,
+            waypoints=state.waypoints,
+            num_waypoints=state.num_waypoints,
+            loop=state.loop,
+            waypoint=wp,
+            vx=state.vx,
+            vz=state.vz,
+            radius=state.radius,
+            interleave=state.interleave,
+        ),
+        deferred,
+    )

@@ -1,0 +1,116 @@
+"""The crowd step's dynamics stage: where each agent walks, avoiding the others (DESIGN §5b).
+
+With :attr:`~jcrowd.crowd.state.StepConfig.avoid` on, the simulation is the authority on
+where people are: each alive agent's velocity comes from the collision-free speed model
+(:mod:`jcrowd.crowd.avoidance`) — its desired direction straight towards its current waypoint
+(the scenario has no obstacles: a layout is refused by ``prepare`` until navigation fields reach
+the step), its free speed, and its neighbours from the cell grid
+(:mod:`jcrowd.crowd.neighbours`) — and its root moves by ``v·dt``. The body turns towards the
+velocity at most :data:`TURN_RATE` rad/s (a walker turns its whole body over about a step, not
+in one frame), and the next gait cycle is chosen from the velocity (:func:`aim_point`), so the
+clips follow the simulated path.
+
+With the crowd split over devices each device steps its own block of agents, but neighbours
+live on every device: ``gather`` assembles the whole crowd's positions, radii and alive flags
+(an all-gather of ``(N, 4)`` floats: 16 MB at 1M agents) and every device sorts them into the
+same grid. ``ids`` are the block's agents' rows in the gathered arrays.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+from jcrowd.crowd.avoidance import AvoidanceParams, avoid
+from jcrowd.crowd.neighbours import GridSpec, candidates, cell_list
+from jcrowd.motion.fastmath import sincos
+
+__all__ = ["TURN_RATE", "aim_point", "steer", "turn_towards", "waypoint_xz"]
+
+TURN_RATE = 3.0
+"""Largest body turn rate (rad/s) when the heading follows the velocity."""
+
+SELECT_WAYPOINTS = 8
+"""Up to this many waypoints per agent, the current one is picked by selects (vectorized);
+longer lists are gathered."""
+
+
+def waypoint_xz(waypoints: Float[Array, "N K 2"], wp: Int[Array, " N"]) -> tuple[Array, Array]:
+    """The ``(x, z)`` of each agent's waypoint ``wp``."""
+    k = waypoints.shape[1]
+    if k > SELECT_WAYPOINTS:
+        row = jnp.take_along_axis(waypoints, wp[:, None, None], axis=1)[:, 0]
+        return row[:, 0], row[:, 1]
+    tx, tz = waypoints[:, 0, 0], waypoints[:, 0, 1]
+    for j in range(1, k):
+        tx = jnp.where(wp == j, waypoints[:, j, 0], tx)
+        tz = jnp.where(wp == j, waypoints[:, j, 1], tz)
+    return tx, tz
+
+
+def steer(
+    grid: GridSpec,
+    x: Array,
+    z: Array,
+    tx: Array,
+    tz: Array,
+    speed: Array,
+    radius: Array,
+    alive: Array,
+    gather: Callable[[Array], Array] | None = None,
+    ids: Array | None = None,
+) -> tuple[Array, Array, Array]:
+    """Velocity ``(vx, vz)`` (m/s) of each agent walking to ``(tx, tz)``, and the grid overflow.
+
+    Agents not alive get velocity 0 and are nobody's neighbour. Without ``gather`` the arrays
+    are the whole crowd; with it they are one block, ``gather`` maps a block's ``(n, c)`` array
+    to the whole crowd's ``(N, c)`` and ``ids`` are the block's rows in it.
+    """
+    dx, dz = tx - x, tz - z
+    norm = jnp.sqrt(dx * dx + dz * dz)
+    desired = jnp.stack([dx, dz], axis=1) / jnp.maximum(norm, 1e-6)[:, None]
+    desired = jnp.where((norm > 1e-6)[:, None], desired, 0.0)
+    mine = jnp.stack([x, z, radius, alive.astype(x.dtype)], axis=1)
+    every = mine if gather is None else gather(mine)
+    pos, rad, live = every[:, :2], every[:, 2], every[:, 3] > 0.5
+    cells = cell_list(grid, pos, live)
+    near = candidates(grid, cells, jnp.stack([x, z], axis=1), ids)
+    no_walls = jnp.zeros((0, 2, 2), x.dtype)
+    velocity, _ = avoid(
+        AvoidanceParams(),
+        jnp.stack([x, z], axis=1),
+        desired,
+        speed,
+        radius,
+        near,
+        no_walls,
+        jnp.zeros((x.shape[0], 1), jnp.int32),
+        others=(pos, rad),
+    )
+    velocity = jnp.where(alive[:, None], velocity, 0.0)
+    return velocity[:, 0], velocity[:, 1], cells.overflow
+
+
+def turn_towards(heading: Array, vx: Array, vz: Array, dt: Array, min_speed: float = 0.05) -> Array:
+    """The heading turned towards the velocity's direction by at most ``TURN_RATE·dt``
+    (unchanged while the agent is slower than ``min_speed`` m/s)."""
+    want = jnp.arctan2(vx, vz)  # heading θ faces (sin θ, cos θ)
+    diff = jnp.remainder(want - heading + jnp.pi, 2 * jnp.pi) - jnp.pi
+    limit = TURN_RATE * dt
+    turn = jnp.clip(diff, -limit, limit)
+    moving = vx * vx + vz * vz > min_speed * min_speed
+    return jnp.where(moving, heading + turn, heading)
+
+
+def aim_point(
+    x: Array, z: Array, vx: Array, vz: Array, heading: Array, ahead_s: float
+) -> Float[Array, "N 2"]:
+    """Where an agent is heading ``ahead_s`` seconds from now at its velocity: the target its
+    next gait cycle aims at. A standing agent aims straight ahead by a hand's breadth (its
+    cycle then walks as slowly as the model allows)."""
+    s, c = sincos(heading)
+    px = jnp.where(vx * vx + vz * vz > 1e-4, x + vx * ahead_s, x + 0.1 * s)
+    pz = jnp.where(vx * vx + vz * vz > 1e-4, z + vz * ahead_s, z + 0.1 * c)
+    return jnp.stack([px, pz], axis=1)

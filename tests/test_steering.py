@@ -1,0 +1,152 @@
+"""The crowd step with the dynamics on (``[dynamics] avoid = true``, jcrowd.crowd.steering).
+
+Oracles: closed forms for the heading and aim rules; for the stepped crowd, the step's own
+contract checked from outside — the root moves by the reported velocity times dt, nobody comes
+closer than the discs allow (the same scene without avoidance does overlap), the split over two
+devices equals one device (subprocesses, as tests/test_per_device.py).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jcrowd import load_default_model
+from jcrowd.crowd import aim_point, prepare, turn_towards
+from jcrowd.scenario import parse_scenario
+
+COUNTERFLOW = """
+seed = 3
+duration = 8.0
+fps = 30
+[ground]
+center = [0, 0]
+size = [30, 40]
+[camera]
+eye = [16, 9, -2]
+target = [0, 0, 0]
+[[groups]]
+name = "north"
+count = 16
+speed = [1.2, 1.4]
+spawn = {{ shape = "rect", center = [0, -5], size = [5, 4] }}
+goal = {{ shape = "rect", center = [0, 17], size = [8, 3] }}
+[[groups]]
+name = "south"
+count = 16
+speed = [1.2, 1.4]
+spawn = {{ shape = "rect", center = [0, 5], size = [5, 4] }}
+goal = {{ shape = "rect", center = [0, -17], size = [8, 3] }}
+[dynamics]
+avoid = {avoid}
+"""
+
+
+def test_turn_towards_is_rate_limited_and_takes_the_short_way():
+    dt = jnp.float32(0.1)  # at most 0.3 rad per step at 3 rad/s
+    heading = jnp.asarray([0.0, 0.0, 3.0, 0.0], jnp.float32)
+    vx = jnp.asarray([1.0, 0.1, -0.1, 0.0], jnp.float32)  # east; nearly north; ...; still
+    vz = jnp.asarray([0.0, 1.0, -1.0, 0.0], jnp.float32)
+    got = np.asarray(turn_towards(heading, vx, vz, dt))
+    want_1 = np.arctan2(0.1, 1.0)  # within the limit: straight there
+    # 3.0 rad to atan2(−0.1, −1) = −3.04 rad: 0.24 rad the short way across ±π, not 6 rad back.
+    across = 3.0 + (np.arctan2(-0.1, -1.0) + 2 * np.pi - 3.0)
+    np.testing.assert_allclose(got, [0.3, want_1, across, 0.0], atol=1e-6)
+
+
+def test_aim_point_extrapolates_the_velocity():
+    got = aim_point(
+        jnp.asarray([1.0, 1.0]),
+        jnp.asarray([2.0, 2.0]),
+        jnp.asarray([0.5, 0.0]),
+        jnp.asarray([1.0, 0.0]),
+        jnp.asarray([0.0, np.pi / 2]),
+        2.0,
+    )
+    # Moving: position + 2 s of velocity; standing still: 0.1 m ahead along the heading (+x).
+    np.testing.assert_allclose(np.asarray(got), [[2.0, 4.0], [1.1, 2.0]], atol=1e-6)
+
+
+def _run(avoid: bool, steps: int = 150):
+    sim, state = prepare(
+        parse_scenario(COUNTERFLOW.format(avoid="true" if avoid else "false"), "t.toml"),
+        load_default_model(),
+    )
+    fn = sim.compiled(donate=False)
+    closest, follow = np.inf, 0.0
+    for i in range(steps):
+        new, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
+        alive = np.asarray(state.alive) & np.asarray(new.alive)
+        x0, z0 = np.asarray(state.x)[alive], np.asarray(state.z)[alive]
+        x1, z1 = np.asarray(new.x)[alive], np.asarray(new.z)[alive]
+        vx, vz = np.asarray(new.vx)[alive], np.asarray(new.vz)[alive]
+        follow = max(follow, float(np.abs(x1 - x0 - vx * sim.dt).max()))
+        follow = max(follow, float(np.abs(z1 - z0 - vz * sim.dt).max()))
+        d = np.hypot(x1[:, None] - x1[None], z1[:, None] - z1[None]) + 9 * np.eye(len(x1))
+        closest = min(closest, float(d.min()))
+        state = new
+    return closest, follow, int(frame.crowding), fn
+
+
+def test_avoiding_agents_keep_apart_and_the_root_follows_the_simulation():
+    closest, follow, crowding, fn = _run(True)
+    assert closest >= 0.9 * 0.4, closest  # two 0.2 m discs, as the dynamics bench's bar
+    assert follow < 1e-5  # root += v·dt exactly (float32 of positions ~10 m)
+    assert crowding == 0
+    assert fn._cache_size() == 1  # compiled once over 150 steps
+
+
+def test_without_avoidance_the_same_crowd_overlaps():
+    """The premise of the test above: head-on groups do collide when nobody avoids."""
+    closest, _, _, _ = _run(False)
+    assert closest < 0.2
+
+
+SCRIPT = textwrap.dedent(
+    """
+    import json, sys
+    import numpy as np
+    from jcrowd import load_default_model
+    from jcrowd.scenario import parse_scenario
+    from jcrowd.crowd import in_agent_order, prepare, shard_state
+    sim, state = prepare(parse_scenario(sys.stdin.read(), "t.toml"), load_default_model())
+    state = shard_state(state)
+    fn = sim.compiled()
+    for i in range(40):
+        state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
+    print(json.dumps({"x": in_agent_order(state.x, state).tolist(),
+                      "z": in_agent_order(state.z, state).tolist()}))
+    """
+)
+
+
+@pytest.mark.slow
+def test_split_over_two_devices_equals_one_device():
+    """Neighbours on the other device are seen through the all-gather: same crowd to 1e-4 m
+    after 40 steps (float32; XLA may order a block's sums differently, and 40 steps of
+    avoidance let a 1e-6 difference grow)."""
+    text = COUNTERFLOW.format(avoid="true")
+    out = {}
+    for k in (1, 2):
+        env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={k}")
+        proc = subprocess.run(
+            [sys.executable, "-c", SCRIPT],
+            input=text,
+            capture_output=True,
+            text=True,
+            env=env,
+            check=True,
+            timeout=600,
+        )
+        out[k] = json.loads(proc.stdout.strip().splitlines()[-1])
+    np.testing.assert_allclose(out[2]["x"], out[1]["x"], atol=1e-4)
+    np.testing.assert_allclose(out[2]["z"], out[1]["z"], atol=1e-4)
+    assert jax.device_count() >= 1
