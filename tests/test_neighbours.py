@@ -121,3 +121,38 @@ def test_grid_spec_errors_and_capacity():
         grid_spec((0.0, 0.0), (1.0, 1.0), 0.0)
     with pytest.raises(JcrowdError, match="hi > lo"):
         grid_spec((0.0, 0.0), (0.0, 1.0), 1.0)
+
+
+@pytest.mark.parametrize(("n", "k"), [(60, 8), (300, 24), (300, 200)])
+def test_compact_candidates_are_the_occupied_slots_in_order(n, k):
+    """Oracle: the full candidate list (asked with no agent excluded) without its empty slots:
+    its first k entries, the agent itself then blanked, are the compacted ids, and its length
+    less the agent itself is the count."""
+    from jcrowd.crowd import compact_candidates
+
+    pos, alive = _crowd(n, 4)
+    spec = grid_spec((-5.0, -3.0), (5.0, 3.0), 1.0)
+    cl = cell_list(spec, jnp.asarray(pos), jnp.asarray(alive))
+    nobody = jnp.full(n, -1, jnp.int32)  # exclude no one: the raw slots, self included
+    raw = np.asarray(candidates(spec, cl, jnp.asarray(pos), nobody))
+    got, count = compact_candidates(spec, cl, jnp.asarray(pos), k)
+    got, count = np.asarray(got), np.asarray(count)
+    for i in range(n):
+        occupied = [int(j) for j in raw[i] if j < n]
+        assert count[i] == len([j for j in occupied if j != i]), i
+        assert [int(j) for j in got[i] if j < n] == [j for j in occupied[:k] if j != i], i
+    assert (count > k).any() or k == 200  # premise: some agents have more than k
+    assert count.max() <= k or k < 200
+
+
+def test_compact_candidates_for_a_block_use_its_rows():
+    from jcrowd.crowd import compact_candidates
+
+    pos, alive = _crowd(120, 6)
+    spec = grid_spec((-5.0, -3.0), (5.0, 3.0), 1.0)
+    cl = cell_list(spec, jnp.asarray(pos), jnp.asarray(alive))
+    whole, whole_n = compact_candidates(spec, cl, jnp.asarray(pos), 40)
+    ids = jnp.arange(1, 120, 2, dtype=jnp.int32)
+    part, part_n = compact_candidates(spec, cl, jnp.asarray(pos)[ids], 40, ids)
+    np.testing.assert_array_equal(np.asarray(part), np.asarray(whole)[1::2])
+    np.testing.assert_array_equal(np.asarray(part_n), np.asarray(whole_n)[1::2])

@@ -43,6 +43,7 @@ from jcrowd.crowd.neighbours import CellList as CellList
 from jcrowd.crowd.neighbours import GridSpec as GridSpec
 from jcrowd.crowd.neighbours import candidates as candidates
 from jcrowd.crowd.neighbours import cell_list as cell_list
+from jcrowd.crowd.neighbours import compact_candidates as compact_candidates
 from jcrowd.crowd.neighbours import grid_spec as grid_spec
 from jcrowd.crowd.schedule import schedule as schedule
 from jcrowd.crowd.simulate import Simulation as Simulation
@@ -62,6 +63,7 @@ from jcrowd.crowd.state import Frame as Frame
 from jcrowd.crowd.state import StepConfig as StepConfig
 from jcrowd.crowd.state import init_state as init_state
 from jcrowd.crowd.state import refresh_far_cores as refresh_far_cores
+from jcrowd.crowd.steering import SPARSE_SLOTS as SPARSE_SLOTS
 from jcrowd.crowd.steering import TURN_RATE as TURN_RATE
 from jcrowd.crowd.steering import aim_point as aim_point
 from jcrowd.crowd.steering import steer as steer

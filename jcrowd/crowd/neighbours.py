@@ -24,7 +24,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from jcrowd.errors import JcrowdError
 
-__all__ = ["CellList", "GridSpec", "candidates", "cell_list", "grid_spec"]
+__all__ = ["CellList", "GridSpec", "candidates", "cell_list", "compact_candidates", "grid_spec"]
 
 
 @dataclass(frozen=True)
@@ -143,3 +143,49 @@ def candidates(
             out.append(jnp.where(inside[:, None], cells.slots[c], n))  # (n, capacity) each
     found = jnp.concatenate(out, axis=1)
     return jnp.where(found == own[:, None], n, found)
+
+
+def compact_candidates(
+    spec: GridSpec,
+    cells: CellList,
+    position: Float[Array, "n 2"],
+    k: int,
+    ids: Array | None = None,
+) -> tuple[Int[Array, "n k"], Int[Array, " n"]]:
+    """The first ``k`` occupied slots of each agent's 3 × 3 cells, in :func:`candidates`' order
+    (the agent's own slot blanked to ``N``), and how many candidates it has (itself excluded).
+
+    Where the crowd is sparse most of the ``9·capacity`` slots :func:`candidates` returns are
+    empty; this reads the cells' occupancy (a running sum over the 3 × 3 cells) and gathers only
+    occupied slots. An agent whose count is below ``k`` has all its candidates in the ``k``
+    columns (one may be its own, blanked); with more it has the first ones in cell order, not
+    the nearest: the caller treats ``count ≥ k`` as needing the full list.
+    """
+    n = cells.cell.shape[0]
+    own = jnp.arange(n, dtype=jnp.int32) if ids is None else ids.astype(jnp.int32)
+    occupied = jnp.sum(cells.slots < n, axis=1, dtype=jnp.int32)  # (C,)
+    ix, iz = _cell_coords(spec, position)
+    block, count = [], []
+    for dx in (-1, 0, 1):
+        for dz in (-1, 0, 1):
+            jx, jz = ix + dx, iz + dz
+            inside = (jx >= 0) & (jx < spec.shape[0]) & (jz >= 0) & (jz < spec.shape[1])
+            c = jnp.where(inside, jx * spec.shape[1] + jz, 0)
+            block.append(c)
+            count.append(jnp.where(inside, occupied[c], 0))
+    cell9 = jnp.stack(block, axis=1)  # (n, 9)
+    count9 = jnp.stack(count, axis=1)
+    end = jnp.cumsum(count9, axis=1)  # inclusive
+    start = end - count9
+    total = end[:, -1]
+    t = jnp.arange(k, dtype=jnp.int32)
+    # Column t reads cell j(t) = the number of cells whose run ends at or before t.
+    j = jnp.sum(end[:, None, :] <= t[None, :, None], axis=2)  # (n, k), 9 where t ≥ total
+    j_safe = jnp.minimum(j, 8)
+    cell = jnp.take_along_axis(cell9, j_safe, axis=1)
+    slot = t[None, :] - jnp.take_along_axis(start, j_safe, axis=1)
+    found = cells.slots[cell, jnp.clip(slot, 0, spec.capacity - 1)]
+    found = jnp.where(t[None, :] < total[:, None], found, n)
+    home = cells.slots[ix * spec.shape[1] + iz]  # the agent's own cell: it is there if stored
+    stored = jnp.any(home == own[:, None], axis=1)
+    return jnp.where(found == own[:, None], n, found), total - stored.astype(jnp.int32)
