@@ -3,7 +3,9 @@
 The pattern of JAX MD's cell lists (``jax_md/partition.py``): the host sizes the grid once
 (:func:`grid_spec`: origin, cell size, cells, slots per cell, with headroom), and the compiled
 step fills it with fixed shapes (:func:`cell_list`), reporting how many agents found their cell
-full instead of dropping them silently. An agent's candidates are the agents stored in the 3 × 3
+full instead of dropping them silently. (JAX MD sorts the particles by cell; here slots are
+claimed in rounds of scatters, which on XLA:CPU is several times faster than sorting the
+crowd.) An agent's candidates are the agents stored in the 3 × 3
 cells around its own (:func:`candidates`); with cells at least as large as the interaction
 range, every agent within that range of it is among them unless its cell overflowed.
 
@@ -19,6 +21,7 @@ import math
 from dataclasses import dataclass
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
@@ -99,25 +102,38 @@ def _cell_coords(spec: GridSpec, position: Float[Array, "N 2"]) -> tuple[Array, 
 def cell_list(spec: GridSpec, position: Float[Array, "N 2"], alive: Bool[Array, " N"]) -> CellList:
     """Sort the alive agents into the grid's cells, ``capacity`` per cell, in agent order.
 
-    Agents are sorted by cell (a stable sort, so within a cell the lower ids come first) and
-    each takes the slot of its rank in its cell; ranks at or beyond the capacity are counted
-    in ``overflow`` and left out.
+    Slots are claimed in rounds: in round ``r`` every cell takes the lowest id among its
+    agents not yet placed into its slot ``r`` (a scatter-min over the agents), until every
+    agent is placed or the slots run out; the agents left over are counted in ``overflow``.
+    Within a cell ids are thus increasing — the order a stable sort by cell gives — at a few
+    scatters per occupied slot instead of a sort of the whole crowd (the rounds stop at the
+    fullest cell's count, a handful where people walk apart).
     """
-    n = position.shape[0]
+    n, ncell = position.shape[0], spec.num_cells
     ix, iz = _cell_coords(spec, position)
-    cell = jnp.where(alive, ix * spec.shape[1] + iz, spec.num_cells)
-    order = jnp.argsort(cell, stable=True)
-    sorted_cell = cell[order]
-    first = jnp.searchsorted(sorted_cell, sorted_cell, side="left")
-    rank = jnp.arange(n, dtype=jnp.int32) - first.astype(jnp.int32)
-    stored = (sorted_cell < spec.num_cells) & (rank < spec.capacity)
-    row = jnp.where(stored, sorted_cell, spec.num_cells)  # out of range: dropped by the scatter
-    slots = jnp.full((spec.num_cells, spec.capacity), n, jnp.int32)
-    slots = slots.at[row, jnp.minimum(rank, spec.capacity - 1)].set(
-        order.astype(jnp.int32), mode="drop"
+    cell = jnp.where(alive, ix * spec.shape[1] + iz, ncell).astype(jnp.int32)
+    ids = jnp.arange(n, dtype=jnp.int32)
+
+    def more(carry: tuple[Array, Array, Array]) -> Array:
+        r, placed, _ = carry
+        return (r < spec.capacity) & ~jnp.all(placed)
+
+    def round_(carry: tuple[Array, Array, Array]) -> tuple[Array, Array, Array]:
+        r, placed, slots = carry
+        key = jnp.where(placed, ncell, cell)
+        lowest = jnp.full((ncell,), n, jnp.int32).at[key].min(ids, mode="drop")
+        won = ~placed & (lowest[jnp.minimum(key, ncell - 1)] == ids)
+        slots = slots.at[jnp.where(won, cell, ncell), r].set(ids, mode="drop")
+        return r + 1, placed | won, slots
+
+    start = (
+        jnp.zeros((), jnp.int32),
+        cell >= ncell,
+        jnp.full((ncell, spec.capacity), n, jnp.int32),
     )
-    overflow = jnp.sum((sorted_cell < spec.num_cells) & (rank >= spec.capacity))
-    return CellList(slots, cell.astype(jnp.int32), overflow.astype(jnp.int32))
+    _, placed, slots = jax.lax.while_loop(more, round_, start)
+    overflow = jnp.sum(~placed, dtype=jnp.int32)
+    return CellList(slots, cell, overflow)
 
 
 def candidates(
