@@ -68,10 +68,12 @@ def test_run_json_keys_and_no_recompiles(recording: tuple[Path, dict]) -> None:
         "compile_s",
         "level_histogram",
         "recompiles",
+        "crowding_max",
         "out",
     ):
         assert key in result
     assert result["agents"] == 12 and result["steps"] == 20 and result["recompiles"] == 0
+    assert result["crowding_max"] == 0  # no avoidance in this scene: no neighbour grid
     assert len(result["level_histogram"]) == 7  # 6 levels + culled
     assert sum(result["level_histogram"]) == pytest.approx(12)
     rec = np.load(out)

@@ -2,7 +2,9 @@
 
 The step is compiled once (timed apart as ``compile_s``) and then run ``--steps`` times (or
 ``--seconds`` of scenario time; default: the scenario's duration), one host copy of what is
-recorded per step. ``recompiles`` counts compilations after the first (0 is the contract).
+recorded per step. ``recompiles`` counts compilations after the first (0 is the contract);
+``crowding_max`` the most agents the crowd dynamics' neighbour grid could not hold in any step
+(0 without ``[dynamics] avoid``).
 
 Recording (``--out run.npz``, written atomically):
 
@@ -245,7 +247,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
         for k in ("tau", "control", "control_next", "has_next"):
             rec[k] = []
     times, hist = [], np.zeros(nlev + 1, np.int64)
-    overflow = deferred = dots = 0
+    overflow = deferred = dots = crowding = 0
     with Progress(console=Console(file=sys.stderr), transient=True) as bar:
         task = bar.add_task(f"{n:,} agents", total=steps)
         for i in range(steps):
@@ -276,6 +278,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
                 "dots": frame.dots,
                 "overflow": frame.overflow,
                 "deferred": frame.deferred,
+                "crowding": frame.crowding,
             }
             if record != "roots":
                 parts.update(
@@ -290,6 +293,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
                 host[key] = in_agent_order(host[key], new)
             overflow += int(host.pop("overflow"))
             deferred += int(host.pop("deferred"))
+            crowding = max(crowding, int(host.pop("crowding")))
             for key, value in host.items():
                 rec[key].append(value)
             hist += np.bincount(np.asarray(host["level"]), minlength=nlev + 1)
@@ -317,6 +321,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
         "recompiles": int(recompiles),
         "overflow_per_step": overflow / steps,
         "deferred_clips": deferred,
+        "crowding_max": crowding,
         "alive_end": int(np.sum(_fetch(state.alive))),
     }
     return result, recording
