@@ -12,8 +12,8 @@ clips follow the simulated path.
 
 With the crowd split over devices each device steps its own block of agents, but neighbours
 live on every device: ``gather`` assembles the whole crowd's positions, radii and alive flags
-(an all-gather of ``(N, 4)`` floats: 16 MB at 1M agents) and every device sorts them into the
-same grid. ``ids`` are the block's agents' rows in the gathered arrays.
+(an all-gather of ``(N, 4)`` floats: 16 MB at 1M agents) and every device fills the same grid
+from them. ``ids`` are the block's agents' rows in the gathered arrays.
 """
 
 from __future__ import annotations
