@@ -17,6 +17,8 @@ duration = 10.0
 [ground]
 center = [0, 0]
 size = [40, 20]
+[dynamics]
+avoid = true
 [camera]
 eye = [0, 1.7, -30]
 target = [0, 1.0, 0]
@@ -188,12 +190,3 @@ def test_agents_spawn_only_in_free_space():
     pillar = shapely.box(-16.0, -1.0, -13.0, 2.0)
     assert not shapely.contains_xy(pillar, pos[:, 0], pos[:, 1]).any()
     assert (pos[:, 0] < -16.0).any() and (pos[:, 1] < -1.0).any()
-
-
-def test_the_crowd_step_refuses_a_layout_it_cannot_use_yet():
-    from jcrowd import load_default_model
-    from jcrowd.crowd import prepare
-
-    s = _parse('[[obstacles]]\nshape = "circle"\ncenter = [0, 0]\nradius = 1.0\n')
-    with pytest.raises(ScenarioError, match=r"t.toml: obstacles/walls/walkable: expected a "):
-        prepare(s, load_default_model())

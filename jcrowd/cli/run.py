@@ -4,7 +4,8 @@ The step is compiled once (timed apart as ``compile_s``) and then run ``--steps`
 ``--seconds`` of scenario time; default: the scenario's duration), one host copy of what is
 recorded per step. ``recompiles`` counts compilations after the first (0 is the contract);
 ``crowding_max`` the most agents the crowd dynamics' neighbour grid could not hold in any step
-(0 without ``[dynamics] avoid``).
+(0 without ``[dynamics] avoid``); ``spawned``, ``exited`` (reached a goal or the end of an open
+path and left) and ``alive_end`` count agents.
 
 Recording (``--out run.npz``, written atomically):
 
@@ -324,6 +325,10 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
         "crowding_max": crowding,
         "alive_end": int(np.sum(_fetch(state.alive))),
     }
+    # Everyone is placed at t = 0 (scenarios have no sources yet): spawned = agents, and an
+    # agent that is no longer alive has left through its goal or at its path's end.
+    result["spawned"] = n
+    result["exited"] = n - result["alive_end"]
     return result, recording
 
 

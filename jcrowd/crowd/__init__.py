@@ -23,6 +23,7 @@ from jcrowd.crowd.dynamics import World as World
 from jcrowd.crowd.dynamics import build_world as build_world
 from jcrowd.crowd.dynamics import pedestrian_step as pedestrian_step
 from jcrowd.crowd.dynamics import wall_segments as wall_segments
+from jcrowd.crowd.dynamics import walls_near_cells as walls_near_cells
 from jcrowd.crowd.export import RECORD_KEYS as RECORD_KEYS
 from jcrowd.crowd.export import agent_motion as agent_motion
 from jcrowd.crowd.lod import Buckets as Buckets
@@ -42,10 +43,17 @@ from jcrowd.crowd.navigation import rasterize as rasterize
 from jcrowd.crowd.neighbours import CellList as CellList
 from jcrowd.crowd.neighbours import GridSpec as GridSpec
 from jcrowd.crowd.neighbours import candidates as candidates
+from jcrowd.crowd.neighbours import cell_index as cell_index
 from jcrowd.crowd.neighbours import cell_list as cell_list
 from jcrowd.crowd.neighbours import compact_candidates as compact_candidates
 from jcrowd.crowd.neighbours import grid_spec as grid_spec
+from jcrowd.crowd.scene import MAX_FIELD_BYTES as MAX_FIELD_BYTES
+from jcrowd.crowd.scene import NAV_CELL_M as NAV_CELL_M
+from jcrowd.crowd.scene import Scene as Scene
+from jcrowd.crowd.scene import build_scene as build_scene
+from jcrowd.crowd.scene import scene_bytes as scene_bytes
 from jcrowd.crowd.schedule import schedule as schedule
+from jcrowd.crowd.simulate import OneStepAtATime as OneStepAtATime
 from jcrowd.crowd.simulate import Simulation as Simulation
 from jcrowd.crowd.simulate import agent_mesh as agent_mesh
 from jcrowd.crowd.simulate import agent_order as agent_order
@@ -66,6 +74,7 @@ from jcrowd.crowd.state import refresh_far_cores as refresh_far_cores
 from jcrowd.crowd.steering import SPARSE_SLOTS as SPARSE_SLOTS
 from jcrowd.crowd.steering import TURN_RATE as TURN_RATE
 from jcrowd.crowd.steering import aim_point as aim_point
+from jcrowd.crowd.steering import current_field as current_field
 from jcrowd.crowd.steering import steer as steer
 from jcrowd.crowd.steering import turn_towards as turn_towards
 from jcrowd.crowd.steering import waypoint_xz as waypoint_xz

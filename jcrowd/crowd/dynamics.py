@@ -35,7 +35,15 @@ from jcrowd.crowd.navigation import (
 from jcrowd.crowd.neighbours import GridSpec, candidates, cell_list, grid_spec
 from jcrowd.errors import JcrowdError
 
-__all__ = ["Pedestrians", "StepInfo", "World", "build_world", "pedestrian_step", "wall_segments"]
+__all__ = [
+    "Pedestrians",
+    "StepInfo",
+    "World",
+    "build_world",
+    "pedestrian_step",
+    "wall_segments",
+    "walls_near_cells",
+]
 
 WALL_REACH_M = 0.8
 """Walls farther than this from an agent are not candidates: a wall at ``r + 0.4`` m repels by
@@ -126,7 +134,7 @@ def wall_segments(walkable: shapely.Geometry) -> np.ndarray:
     return np.concatenate(segs).astype(np.float32) if segs else np.zeros((0, 2, 2), np.float32)
 
 
-def _cell_walls(grid: GridSpec, walls: np.ndarray) -> np.ndarray:
+def walls_near_cells(grid: GridSpec, walls: np.ndarray) -> np.ndarray:
     """Per cell, the ids of the segments within ``WALL_REACH_M`` of the cell (host, STRtree)."""
     s = len(walls)
     lines = shapely.linestrings(walls) if s else np.array([], object)
@@ -195,4 +203,4 @@ def build_world(
         max_density=max_density,
     )
     nav = Navigation(jnp.asarray(np.stack(fields)), fg)
-    return World(nav, jnp.asarray(walls), jnp.asarray(_cell_walls(spec, walls)), spec)
+    return World(nav, jnp.asarray(walls), jnp.asarray(walls_near_cells(spec, walls)), spec)

@@ -27,7 +27,15 @@ from jaxtyping import Array, Bool, Float, Int
 
 from jcrowd.errors import JcrowdError
 
-__all__ = ["CellList", "GridSpec", "candidates", "cell_list", "compact_candidates", "grid_spec"]
+__all__ = [
+    "CellList",
+    "GridSpec",
+    "candidates",
+    "cell_index",
+    "cell_list",
+    "compact_candidates",
+    "grid_spec",
+]
 
 
 @dataclass(frozen=True)
@@ -97,6 +105,12 @@ def _cell_coords(spec: GridSpec, position: Float[Array, "N 2"]) -> tuple[Array, 
     ix = jnp.floor((position[:, 0] - spec.origin[0]) / spec.cell).astype(jnp.int32)
     iz = jnp.floor((position[:, 1] - spec.origin[1]) / spec.cell).astype(jnp.int32)
     return jnp.clip(ix, 0, spec.shape[0] - 1), jnp.clip(iz, 0, spec.shape[1] - 1)
+
+
+def cell_index(spec: GridSpec, position: Float[Array, "N 2"]) -> Int[Array, " N"]:
+    """Each position's cell ``ix·nz + iz`` (clamped into the grid)."""
+    ix, iz = _cell_coords(spec, position)
+    return ix * spec.shape[1] + iz
 
 
 def cell_list(spec: GridSpec, position: Float[Array, "N 2"], alive: Bool[Array, " N"]) -> CellList:

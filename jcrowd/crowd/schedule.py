@@ -14,16 +14,25 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool
 
 from jcrowd.crowd.clips import CrowdModel, next_clips_lod
+from jcrowd.crowd.navigation import field_values
+from jcrowd.crowd.scene import Scene
 from jcrowd.crowd.state import CrowdState, StepConfig
-from jcrowd.crowd.steering import aim_point, waypoint_xz
+from jcrowd.crowd.steering import aim_point, current_field, waypoint_xz
 
 __all__ = ["schedule"]
 
 
 def schedule(
-    cm: CrowdModel, config: StepConfig, state: CrowdState, synthesized: Bool[Array, " N"]
+    cm: CrowdModel,
+    config: StepConfig,
+    state: CrowdState,
+    synthesized: Bool[Array, " N"],
+    scene: Scene | None = None,
 ) -> tuple[CrowdState, Array]:
     """Waypoints, next-clip choice at mid-cycle (bounded per step) and clip hand-over.
+
+    With a ``scene`` a waypoint is reached only inside its navigation target (field ≤ 0, see
+    :mod:`jcrowd.crowd.scene`), not through a wall.
 
     Agents synthesized this step get a kriged next clip, the others the nearest captured cycle
     to the controls they aim at (:func:`jcrowd.crowd.clips.next_clips_lod`).
@@ -32,6 +41,9 @@ def schedule(
     last = float(cm.frames - 1)
     tx, tz = waypoint_xz(state.waypoints, state.waypoint)
     near = (tx - state.x) ** 2 + (tz - state.z) ** 2 < config.reach**2
+    if scene is not None:
+        inside = field_values(scene.nav, current_field(state), state.x, state.z) <= 0.0
+        near = near & inside
     reached = state.alive & near
     wp = state.waypoint + reached.astype(jnp.int32)
     done = wp >= state.num_waypoints
@@ -102,6 +114,7 @@ def schedule(
             num_waypoints=state.num_waypoints,
             loop=state.loop,
             waypoint=wp,
+            field=state.field,
             vx=state.vx,
             vz=state.vz,
             radius=state.radius,

@@ -19,7 +19,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
@@ -28,6 +28,7 @@ import numpy as np
 from jcrowd.crowd.clips import CrowdModel, build_crowd_model
 from jcrowd.crowd.lod import CameraView
 from jcrowd.crowd.neighbours import GridSpec, grid_spec
+from jcrowd.crowd.scene import Scene, build_scene
 from jcrowd.crowd.state import CrowdState, Frame, StepConfig, init_state
 from jcrowd.crowd.stepping import default_capacities, step
 from jcrowd.errors import ScenarioError
@@ -36,6 +37,7 @@ from jcrowd.scenario.schema import Scenario, camera_at
 from jcrowd.scenario.spawning import Spawn, spawn
 
 __all__ = [
+    "OneStepAtATime",
     "Simulation",
     "agent_mesh",
     "agent_order",
@@ -87,6 +89,7 @@ class Simulation:
     config: StepConfig
     scenario: Scenario
     spawn: Spawn
+    scene: Scene | None = None
 
     @property
     def num_agents(self) -> int:
@@ -138,19 +141,50 @@ class Simulation:
         agents): the state passed in must not be used again; copy it first if it must
         (``jax.tree.map(jnp.copy, state)``).
         """
-        crowd, config = self.crowd, self.config
+        crowd, config, scene = self.crowd, self.config, self.scene
 
         def run(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
-            return step(crowd, config, state, view, dt)
+            return step(crowd, config, state, view, dt, scene=scene)
 
         devices = jax.devices()
         if len(devices) > 1:
-            run = _per_device_step(crowd, config, devices)
+            run = _per_device_step(crowd, config, devices, scene)
         options = step_compiler_options()
         donated = (0,) if donate else ()
         if options:
-            return jax.jit(run, donate_argnums=donated, compiler_options=options)
-        return jax.jit(run, donate_argnums=donated)
+            jitted = jax.jit(run, donate_argnums=donated, compiler_options=options)
+        else:
+            jitted = jax.jit(run, donate_argnums=donated)
+        return jitted if len(devices) == 1 else OneStepAtATime(jitted)
+
+
+class OneStepAtATime:
+    """A compiled multi-device step that returns only once every device has finished it.
+
+    Why: with several CPU devices in one process, XLA launches each device's part of a step on
+    a small shared thread pool. When the caller queues step ``n + 1`` before step ``n`` is done
+    (JAX dispatches asynchronously), device 0's part of ``n + 1`` can take the last free thread
+    while device 1's part of ``n`` still waits for one; device 0's part of ``n`` then waits in
+    the positions' all-gather for a device that never starts, and XLA aborts the process after
+    40 s ("Termination timeout for `all gather`", seen in about 1 run in 10 of 40 avoiding
+    steps on two devices, under load more often; a thread dump showed the launch blocked on
+    XLA's per-device semaphore). Waiting for each step keeps one step in flight. It costs the
+    overlap of the host's dispatch with the devices' work, a fraction of a millisecond per step.
+
+    Calls and ``_cache_size`` (compilations so far) pass through to the jitted step.
+    """
+
+    def __init__(self, jitted: Any) -> None:
+        self._jitted = jitted
+
+    def __call__(self, *args: Any) -> Any:
+        return jax.block_until_ready(self._jitted(*args))
+
+    def _cache_size(self) -> int:
+        return int(self._jitted._cache_size())
+
+    def lower(self, *args: Any, **kwargs: Any) -> Any:
+        return self._jitted.lower(*args, **kwargs)
 
 
 def on_all_devices(tree: Any) -> Any:
@@ -232,7 +266,9 @@ def per_device_config(config: StepConfig, devices: int) -> StepConfig:
     )
 
 
-def _per_device_step(crowd: CrowdModel, config: StepConfig, devices: list[Any]) -> Any:
+def _per_device_step(
+    crowd: CrowdModel, config: StepConfig, devices: list[Any], scene: Scene | None = None
+) -> Any:
     """The step over several devices: each runs it on its own block of agents.
 
     ``shard_map`` over a one-axis mesh ``agents`` (the mesh :func:`shard_state` places the state
@@ -257,24 +293,39 @@ def _per_device_step(crowd: CrowdModel, config: StepConfig, devices: list[Any]) 
     mesh = agent_mesh()
     local_config = per_device_config(config, k)
 
-    def gather(block: jax.Array) -> jax.Array:
-        return jax.lax.all_gather(block, "agents", tiled=True)
-
     def local(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
+        gathered: list[jax.Array] = []
+
+        def gather(block: jax.Array) -> jax.Array:
+            gathered.append(jax.lax.all_gather(block, "agents", tiled=True))
+            return gathered[-1]
+
         n_local = state.num_agents
         device = jax.lax.axis_index("agents")
         # The block's rows in the gathered crowd: device k's block follows devices 0 … k − 1.
         rows = device * n_local + jnp.arange(n_local, dtype=jnp.int32)
-        new, frame = step(crowd, local_config, state, view, dt, gather, rows)
+        new, frame = step(crowd, local_config, state, view, dt, gather, rows, scene)
         slots = tuple(  # local slot s holds agent s·K + k (agent_order)
             jnp.where(ok, s * k + device, n_local * k).astype(s.dtype)
             for s, ok in zip(frame.slots, frame.valid, strict=True)
         )
-        total = (jax.lax.psum(frame.overflow, "agents"), jax.lax.psum(frame.deferred, "agents"))
-        # Every device sorted the whole crowd into the grid: its count is already the total.
-        crowding = jax.lax.pmax(frame.crowding, "agents")
+        # The three counters cross devices in one collective (each is a rendezvous of every
+        # device), ordered after the positions' gather.
+        counters = jnp.stack([frame.overflow, frame.deferred, frame.crowding]).astype(jnp.int32)
+        if gathered:
+            counters, _ = jax.lax.optimization_barrier((counters, gathered))
+        every = jax.lax.all_gather(counters, "agents")  # (K, 3)
+        # Every device sorted the whole crowd into the grid: its crowding is already the total.
+        overflow, deferred, crowding = every[:, 0].sum(), every[:, 1].sum(), every[:, 2].max()
         return new, Frame(
-            slots, frame.valid, frame.points, frame.level, frame.dots, *total, crowding
+            slots,
+            frame.valid,
+            frame.points,
+            frame.level,
+            frame.dots,
+            overflow.astype(frame.overflow.dtype),
+            deferred.astype(frame.deferred.dtype),
+            crowding.astype(frame.crowding.dtype),
         )
 
     agents, same = P("agents"), P()
@@ -324,17 +375,13 @@ def _neighbour_grid(scenario: Scenario) -> GridSpec:
 def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdState]:
     """Build the simulation and its first state (deterministic from ``scenario.seed``).
 
+    A layout (obstacles, walls, walkable area) becomes the step's :class:`Scene`: navigation
+    fields per waypoint and the walls (:func:`~jcrowd.crowd.scene.build_scene`).
+
     Raises:
-        ScenarioError: the scenario has obstacles, walls or a walkable area: they are parsed and
-            checked, but the crowd step does not drive agents around them yet (the standalone
-            :func:`~jcrowd.crowd.dynamics.pedestrian_step` does), so running it would walk
-            agents through walls.
+        ScenarioError: settings that do not fit the model, or a layout whose navigation fields
+            are too large or cannot reach a target.
     """
-    if not scenario.layout.empty:
-        raise ScenarioError(
-            f"{scenario.source}: obstacles/walls/walkable: expected a scenario without a layout "
-            "(the crowd step does not route agents around obstacles yet), found one"
-        )
     crowd = build_crowd_model(model)
     levels = len(model.levels)
     lod = scenario.lod
@@ -364,6 +411,9 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
     )
     config.check(levels)
     sp = spawn(scenario)
+    scene = None
+    if not scenario.layout.empty:
+        scene, fields = build_scene(scenario, sp, cast(GridSpec, config.grid), config.reach)
     arrays = {
         "position": sp.position,
         "heading": sp.heading,
@@ -374,12 +424,14 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         "loop": sp.loop,
         "radius": np.full(sp.num_agents, scenario.dynamics.radius, np.float32),
     }
+    if scene is not None:
+        arrays["field"] = fields
     state = init_state(
         crowd,
         {k: jnp.asarray(np.asarray(v)) for k, v in arrays.items()},
         jax.random.key(scenario.seed),
     )
-    return Simulation(crowd, config, scenario, sp), state
+    return Simulation(crowd, config, scenario, sp, scene), state
 
 
 def shard_state(state: CrowdState) -> CrowdState:

@@ -134,6 +134,8 @@ class CrowdState(eqx.Module):
     num_waypoints: Int[Array, " N"]
     loop: Bool[Array, " N"]
     waypoint: Int[Array, " N"]  # index of the waypoint being walked to
+    # Navigation field per waypoint (jcrowd.crowd.scene); −1 without a layout (walk straight).
+    field: Int[Array, "N K"]
     vx: Float[Array, " N"]  # simulated velocity (m/s) when the step avoids (else the spawn one)
     vz: Float[Array, " N"]
     radius: Float[Array, " N"]  # m, the body disc the crowd dynamics keeps apart
@@ -201,7 +203,8 @@ def init_state(
 
     ``spawn`` holds ``position (N, 2)``, ``heading``, ``height``, ``speed`` ``(N,)``,
     ``waypoints (N, K, 2)``, ``num_waypoints (N,)``, ``loop (N,)``, and optionally ``radius``
-    ``(N,)`` (default :data:`DEFAULT_RADIUS`).
+    ``(N,)`` (default :data:`DEFAULT_RADIUS`) and ``field`` ``(N, K)`` (each waypoint's
+    navigation field, :func:`jcrowd.crowd.scene.build_scene`; default −1: none).
     """
     n = spawn["position"].shape[0]
     heading = jnp.asarray(spawn["heading"], jnp.float32)
@@ -243,6 +246,7 @@ def init_state(
         num_waypoints=jnp.asarray(spawn["num_waypoints"], jnp.int32),
         loop=jnp.asarray(spawn["loop"], bool),
         waypoint=jnp.zeros(n, jnp.int32),
+        field=jnp.asarray(spawn.get("field", np.full(waypoints.shape[:2], -1)), jnp.int32),
         vx=speed * jnp.sin(heading),
         vz=speed * jnp.cos(heading),
         radius=jnp.asarray(spawn.get("radius", np.full(n, DEFAULT_RADIUS)), jnp.float32),

@@ -3,8 +3,8 @@
 With :attr:`~jcrowd.crowd.state.StepConfig.avoid` on, the simulation is the authority on
 where people are: each alive agent's velocity comes from the collision-free speed model
 (:mod:`jcrowd.crowd.avoidance`) — its desired direction straight towards its current waypoint
-(the scenario has no obstacles: a layout is refused by ``prepare`` until navigation fields reach
-the step), its free speed, and its neighbours from the cell grid
+(or, with a layout, down the waypoint's navigation field: :mod:`jcrowd.crowd.scene`; the
+scene's walls then repel too), its free speed, and its neighbours from the cell grid
 (:mod:`jcrowd.crowd.neighbours`) — and its root moves by ``v·dt``. The body turns towards the
 velocity at most :data:`TURN_RATE` rad/s (a walker turns its whole body over about a step, not
 in one frame), and the next gait cycle is chosen from the velocity (:func:`aim_point`), so the
@@ -25,10 +25,27 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from jcrowd.crowd.avoidance import AvoidanceParams, avoid
-from jcrowd.crowd.neighbours import GridSpec, candidates, cell_list, compact_candidates
+from jcrowd.crowd.navigation import desired_directions, field_values
+from jcrowd.crowd.neighbours import (
+    GridSpec,
+    candidates,
+    cell_index,
+    cell_list,
+    compact_candidates,
+)
+from jcrowd.crowd.scene import Scene
+from jcrowd.crowd.state import CrowdState
 from jcrowd.motion.fastmath import sincos
 
-__all__ = ["SPARSE_SLOTS", "TURN_RATE", "aim_point", "steer", "turn_towards", "waypoint_xz"]
+__all__ = [
+    "SPARSE_SLOTS",
+    "TURN_RATE",
+    "aim_point",
+    "current_field",
+    "steer",
+    "turn_towards",
+    "waypoint_xz",
+]
 
 SPARSE_SLOTS = 24
 """Neighbour columns read for an agent whose 3 × 3 cells hold fewer agents than this; denser
@@ -55,6 +72,11 @@ def waypoint_xz(waypoints: Float[Array, "N K 2"], wp: Int[Array, " N"]) -> tuple
     return tx, tz
 
 
+def current_field(state: CrowdState) -> Int[Array, " N"]:
+    """Each agent's navigation field for its current waypoint (−1: none)."""
+    return jnp.take_along_axis(state.field, state.waypoint[:, None], axis=1)[:, 0]
+
+
 def steer(
     grid: GridSpec,
     x: Array,
@@ -66,23 +88,36 @@ def steer(
     alive: Array,
     gather: Callable[[Array], Array] | None = None,
     ids: Array | None = None,
+    scene: Scene | None = None,
+    field: Array | None = None,
 ) -> tuple[Array, Array, Array]:
     """Velocity ``(vx, vz)`` (m/s) of each agent walking to ``(tx, tz)``, and the grid overflow.
 
     Agents not alive get velocity 0 and are nobody's neighbour. Without ``gather`` the arrays
     are the whole crowd; with it they are one block, ``gather`` maps a block's ``(n, c)`` array
-    to the whole crowd's ``(N, c)`` and ``ids`` are the block's rows in it.
+    to the whole crowd's ``(N, c)`` and ``ids`` are the block's rows in it. With a ``scene``
+    and each agent's ``field`` the desired direction runs down that field until the agent is
+    inside its target (then straight at ``(tx, tz)``), and the scene's walls repel.
     """
     dx, dz = tx - x, tz - z
     norm = jnp.sqrt(dx * dx + dz * dz)
     desired = jnp.stack([dx, dz], axis=1) / jnp.maximum(norm, 1e-6)[:, None]
     desired = jnp.where((norm > 1e-6)[:, None], desired, 0.0)
+    if scene is not None and field is not None:
+        here_xz = jnp.stack([x, z], axis=1)
+        inside = field_values(scene.nav, field, x, z) <= 0.0
+        down = desired_directions(scene.nav, field, here_xz)
+        desired = jnp.where(inside[:, None], desired, down)
     mine = jnp.stack([x, z, radius, alive.astype(x.dtype)], axis=1)
     every = mine if gather is None else gather(mine)
     pos, rad, live = every[:, :2], every[:, 2], every[:, 3] > 0.5
     rows = jnp.arange(x.shape[0], dtype=jnp.int32) if ids is None else ids
     cells = cell_list(grid, pos, live)
     here = jnp.stack([x, z], axis=1)
+    if scene is None:
+        walls, wall_ids = jnp.zeros((0, 2, 2), x.dtype), jnp.zeros((x.shape[0], 1), jnp.int32)
+    else:
+        walls, wall_ids = scene.walls, scene.cell_walls[cell_index(grid, here)]
 
     def velocities(sel: Array, near: Array) -> Array:
         v, _ = avoid(
@@ -92,8 +127,8 @@ def steer(
             speed[sel],
             radius[sel],
             near,
-            jnp.zeros((0, 2, 2), x.dtype),
-            jnp.zeros((near.shape[0], 1), jnp.int32),
+            walls,
+            wall_ids[sel],
             others=(pos, rad),
         )
         return v

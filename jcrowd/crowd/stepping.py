@@ -56,9 +56,10 @@ from jcrowd.crowd.lod import (
     screen_height_px,
 )
 from jcrowd.crowd.neighbours import GridSpec
+from jcrowd.crowd.scene import Scene
 from jcrowd.crowd.schedule import schedule
 from jcrowd.crowd.state import CrowdState, Frame, StepConfig, refresh_far_cores
-from jcrowd.crowd.steering import steer, turn_towards, waypoint_xz
+from jcrowd.crowd.steering import current_field, steer, turn_towards, waypoint_xz
 from jcrowd.crowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
 from jcrowd.motion.fastmath import sincos
 
@@ -229,11 +230,13 @@ def step(
     dt: Array,
     gather: Callable[[Array], Array] | None = None,
     ids: Array | None = None,
+    scene: Scene | None = None,
 ) -> tuple[CrowdState, Frame]:
     """Advance the crowd by ``dt`` seconds and return the frame at the step's start.
 
     ``gather`` and ``ids``: on one device of several, how the dynamics see the whole crowd
-    (:func:`jcrowd.crowd.steering.steer`); unused without ``config.avoid``.
+    (:func:`jcrowd.crowd.steering.steer`); unused without ``config.avoid``. ``scene``: the
+    layout's navigation fields and walls (:mod:`jcrowd.crowd.scene`; with ``config.avoid``).
     """
     nlev = len(cm.decoders.levels)
     dt = jnp.asarray(dt, jnp.float32)
@@ -276,7 +279,18 @@ def step(
         grid = cast(GridSpec, config.grid)  # StepConfig.check requires it with avoid
         tx, tz = waypoint_xz(state.waypoints, state.waypoint)
         vx, vz, crowding = steer(
-            grid, state.x, state.z, tx, tz, state.speed, state.radius, alive, gather, ids
+            grid,
+            state.x,
+            state.z,
+            tx,
+            tz,
+            state.speed,
+            state.radius,
+            alive,
+            gather,
+            ids,
+            scene,
+            None if scene is None else current_field(state),
         )
         dx, dz = vx * dt, vz * dt
         heading = turn_towards(state.heading, vx, vz, dt)
@@ -292,7 +306,7 @@ def step(
         vz,
     )
     state = eqx.tree_at(lambda s: (s.x, s.z, s.heading, s.tau, s.vx, s.vz), state, moved)
-    state, deferred = schedule(cm, config, state, buckets.level < nlev)
+    state, deferred = schedule(cm, config, state, buckets.level < nlev, scene)
     state = eqx.tree_at(lambda s: s.level, state, buckets.level)
     frame = Frame(
         buckets.slots,

@@ -305,6 +305,13 @@ class Scenario:
                 key = f"groups[{i}].path.waypoints[{k}]"
                 require(not out.any(), key, f"a point {inside}", g.path.waypoints[k])
         if not self.layout.empty:
+            require(
+                self.dynamics.avoid,
+                "dynamics.avoid",
+                "true in a scenario with obstacles, walls or a walkable area (only the crowd "
+                "dynamics route agents around them)",
+                self.dynamics.avoid,
+            )
             check_layout(self.ground, self.layout, self.groups)
 
 
