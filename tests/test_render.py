@@ -39,7 +39,7 @@ from jcrowd.render import (
     view_matrix,
     write_png,
 )
-from jcrowd.render.meshes import capsule_mesh
+from jcrowd.render.meshes import OBSTACLE_COLOR, capsule_mesh, prism_mesh
 
 PARENTS = walker_skeleton().parents
 W, H = 160, 120
@@ -154,6 +154,59 @@ def test_capsule_mesh_is_closed_and_outward() -> None:
     a, b, c = p[tris[:, 0]], p[tris[:, 1]], p[tris[:, 2]]
     outward = np.einsum("ij,ij->i", np.cross(b - a, c - a), (a + b + c) / 3 - [0.0, 0.0, 1.0])
     assert np.all(outward > 0)
+
+
+def test_prism_mesh_is_closed_outward_and_covers_the_area() -> None:
+    """A square with a square hole, extruded to 1 m: closed but for its bottom on the ground
+    (every other edge twice, once in each direction); each triangle wound counter-clockwise
+    seen from outside the solid (its normal points away from the solid: its centroid moved
+    1 cm along it leaves the solid); the top's triangles cover the area exactly (shapely's
+    area as the oracle)."""
+    import shapely
+
+    area = shapely.box(0, 0, 4, 4).difference(shapely.box(1, 1, 2, 2))
+    mesh = prism_mesh(area, 1.0).reshape(-1, 3, 6)
+    tri, normal = mesh[..., :3].astype(np.float64), mesh[:, 0, 3:]
+    geometric = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    assert np.all(np.einsum("ij,ij->i", geometric, normal) > 0)  # wound to face the normal
+    probe = tri.mean(axis=1) + 0.01 * normal
+    outside = ~shapely.contains_xy(area, probe[:, 0], probe[:, 2]) | (probe[:, 1] > 1.0)
+    assert outside.all()
+    keys = np.round(tri, 6)
+    edges = [
+        tuple(map(tuple, keys[t, [a, b]]))
+        for t in range(len(keys))
+        for a, b in ((0, 1), (1, 2), (2, 0))
+        if keys[t, a, 1] > 0 or keys[t, b, 1] > 0  # the open bottom stands on the ground
+    ]
+    assert sorted(edges) == sorted((b, a) for a, b in edges)
+    top = normal[:, 1] > 0.5
+    area_top = 0.5 * np.abs(geometric[top][:, 1]).sum()
+    assert area_top == pytest.approx(area.area, rel=1e-9)
+    assert len(prism_mesh(shapely.Polygon())) == 0
+
+
+def test_obstacles_are_drawn_lit_from_above(ctx: moderngl.Context) -> None:
+    """A 2 m block in front of the camera covers the pixels its top projects to, in the
+    obstacle colour times the shading of an upward face (ambient·1 + (1 − ambient)·l_y, the
+    shader's formula with n = +y); without obstacles the same pixel is ground."""
+    import shapely
+
+    from jcrowd.render.renderer import _AMBIENT, _LIGHT_DIR
+
+    mesh = prism_mesh(shapely.box(-1, -1, 1, 1), 1.0)
+    nobody = LevelInstances(np.zeros((1, len(PARENTS), 3)), np.zeros(1, bool), np.zeros((1, 3)))
+    with CrowdRenderer([PARENTS], W, H, capacity=[1], ctx=ctx, samples=0, obstacles=mesh) as r:
+        image = r.render(VIEW, [nobody])
+    with CrowdRenderer([PARENTS], W, H, capacity=[1], ctx=ctx, samples=0) as r:
+        bare = r.render(VIEW, [nobody])
+    xy, _ = project(np.array([[0.0, 1.0, -0.5]]), VIEW, W, H)
+    col, row = xy[0]
+    px = image[int(row), int(col)].astype(float)
+    shade = _AMBIENT + (1 - _AMBIENT) * max(_LIGHT_DIR[1], 0.0)
+    want = np.clip(np.asarray(OBSTACLE_COLOR) * shade, 0, 1) * 255
+    np.testing.assert_allclose(px, want, atol=2.0)  # 8-bit rounding (+1 for the driver)
+    assert np.abs(bare[int(row), int(col)].astype(float) - want).max() > 10
 
 
 def test_palettes() -> None:

@@ -104,6 +104,17 @@ def _dot_sticks(xz: np.ndarray, heights: np.ndarray) -> np.ndarray:
     return np.stack([ground, head], axis=1)
 
 
+def scenario_obstacles(scenario: Any) -> np.ndarray:
+    """The scenario's obstacles, walls and the ground outside ``walkable`` as drawable prisms
+    (:func:`jcrowd.render.meshes.prism_mesh`); none without a layout."""
+    from jcrowd.render.meshes import prism_mesh
+    from jcrowd.scenario import blocked_space
+
+    if scenario.layout.empty:
+        return np.zeros((0, 6), np.float32)
+    return prism_mesh(blocked_space(scenario.ground, scenario.layout))
+
+
 def render_scenario(
     scenario: Any,
     model: Any,
@@ -144,7 +155,10 @@ def render_scenario(
     try:
         with (
             CrowdRenderer(
-                [parents] * len(caps) + [DOT_PARENTS], *size, capacity=(*caps, n)
+                [parents] * len(caps) + [DOT_PARENTS],
+                *size,
+                capacity=(*caps, n),
+                obstacles=scenario_obstacles(scenario),
             ) as renderer,
             Progress(console=Console(file=sys.stderr), transient=True) as bar,
         ):
@@ -223,7 +237,11 @@ def render_recording(
         dots = "dots" in rec  # recordings made before detail culling have none
         n = len(rec["height"])
         meshes = [parents] * nlev + ([DOT_PARENTS] if dots else [])
-        with CrowdRenderer(meshes, w, h, capacity=caps + ([n] if dots else [])) as renderer:
+        # Recordings of scenarios with a layout carry its prisms (jcrowd run).
+        obstacles = rec["obstacles"] if "obstacles" in rec else None
+        with CrowdRenderer(
+            meshes, w, h, capacity=caps + ([n] if dots else []), obstacles=obstacles
+        ) as renderer:
             for i in range(n_frames):
                 t = time.perf_counter()
                 levels = [

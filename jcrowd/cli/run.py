@@ -28,7 +28,8 @@ own block of agents, and process 0 writes the recording. Each process prints its
 
 Arrays are named ``position``, ``heading``, ``level``, ``dots``, ``alive``, ``slots_l``,
 ``valid_l``, ``points_l``, ``tau``, ``control``, ``control_next``, ``has_next`` plus ``height``,
-``group``, ``color``, ``parents`` (bones to draw), ``eye``/``target`` per step and ``lens``
+``group``, ``color``, ``parents`` (bones to draw), ``obstacles`` (scenarios with walls: their
+prisms, :func:`jcrowd.render.meshes.prism_mesh`), ``eye``/``target`` per step and ``lens``
 (fov, near, far) of the camera, ``fps`` and ``model`` (the model file used)."""
 
 from __future__ import annotations
@@ -312,6 +313,10 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
         lens=np.asarray([cam.fov_deg, cam.near, cam.far], np.float64),
         levels=np.asarray(nlev),
     )
+    if not sim.scenario.layout.empty:  # drawn by jcrowd render RUN.npz
+        from jcrowd.cli.render import scenario_obstacles
+
+        recording["obstacles"] = scenario_obstacles(sim.scenario)
     result = {
         "agents": n,
         "steps": steps,

@@ -8,6 +8,9 @@ shader places it at ``mix(start, end, flag) + r · B · offset`` with ``B`` an o
 whose z axis is the bone direction, so one mesh fits every bone length exactly (caps stay round)
 and its normal is simply ``B · offset``. Joints shared by two bones are covered by both caps.
 
+Obstacles and walls are prisms (:func:`prism_mesh`): the blocked area extruded from the ground
+to :data:`OBSTACLE_HEIGHT_M`, its top triangulated (constrained Delaunay), lit like the bones.
+
 The ground is one square at y = 0 whose grid (1 m minor, 10 m major lines) is drawn in the
 fragment shader with screen-space derivatives, so lines stay one pixel wide at any distance
 and fade before they alias; the square fades into the background towards its edge.
@@ -16,6 +19,7 @@ and fade before they alias; the square fades into the background towards its edg
 from __future__ import annotations
 
 import numpy as np
+import shapely
 from jaxtyping import Float, Int
 
 from jcrowd.errors import RenderError
@@ -27,11 +31,21 @@ __all__ = [
     "GROUND_VERTEX",
     "GROUP_COLORS",
     "LEVEL_COLORS",
+    "OBSTACLE_COLOR",
+    "OBSTACLE_HEIGHT_M",
+    "OBSTACLE_VERTEX",
     "capsule_detail",
     "capsule_mesh",
     "ground_mesh",
     "palette_colors",
+    "prism_mesh",
 ]
+
+OBSTACLE_HEIGHT_M = 1.0
+"""Height obstacles and walls are drawn at (m): a barrier's, low enough to see people over."""
+
+OBSTACLE_COLOR = (0.58, 0.52, 0.47)
+"""Obstacles' colour (RGB in [0, 1]), a warm grey apart from the ground and the level ramp."""
 
 LEVEL_COLORS: Float[np.ndarray, "10 3"] = np.array(
     [
@@ -156,6 +170,57 @@ def capsule_mesh(
     return vertices.astype(np.float32), np.concatenate(tris).astype(np.uint32)
 
 
+def _facing(tri: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """The triangles ``(T, 3, 3)`` wound counter-clockwise seen from where ``normal`` points
+    (``(T, 3)``), the side GL draws with ``front_face = "ccw"``."""
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    flip = np.sum(n * normal, axis=1) < 0
+    out = tri.copy()
+    out[flip, 1], out[flip, 2] = tri[flip, 2], tri[flip, 1]
+    return out
+
+
+def prism_mesh(
+    area: shapely.Geometry, height: float = OBSTACLE_HEIGHT_M
+) -> Float[np.ndarray, "V 6"]:
+    """``area`` (polygons on the ground, ``[x, z]``) extruded to ``height``: triangle vertices as
+    rows ``(x, y, z, nx, ny, nz)``, three per triangle — the top facing up, a wall outwards
+    along every edge of every ring (holes included). Empty for an empty area."""
+    polys = [g for g in getattr(area, "geoms", [area]) if isinstance(g, shapely.Polygon)]
+    rows: list[np.ndarray] = []
+    for poly in polys:
+        if poly.is_empty:
+            continue
+        poly = shapely.geometry.polygon.orient(poly, sign=1.0)  # exterior CCW, holes CW in (x, z)
+        tris = shapely.constrained_delaunay_triangles(poly)
+        top = np.array([np.asarray(t.exterior.coords)[:3] for t in tris.geoms], np.float64)
+        top3 = np.stack([top[..., 0], np.full(top.shape[:2], height), top[..., 1]], axis=-1)
+        up = np.tile([0.0, 1.0, 0.0], (len(top3), 1))
+        rows.append(_with_normals(_facing(top3, up), up))
+        for ring in [poly.exterior, *poly.interiors]:
+            xy = np.asarray(ring.coords)
+            p, q = xy[:-1], xy[1:]
+            d = q - p
+            # Exterior CCW and holes CW (in x, z): the outside of the solid is on the right.
+            out = np.stack([d[:, 1], np.zeros(len(d)), -d[:, 0]], axis=1)
+            out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
+            p0 = np.stack([p[:, 0], np.zeros(len(p)), p[:, 1]], axis=1)
+            q0 = np.stack([q[:, 0], np.zeros(len(q)), q[:, 1]], axis=1)
+            lift = np.array([0.0, height, 0.0])
+            p1, q1 = p0 + lift, q0 + lift
+            quads = np.concatenate([np.stack([p0, q0, q1], 1), np.stack([p0, q1, p1], 1)])
+            normals = np.concatenate([out, out])
+            rows.append(_with_normals(_facing(quads, normals), normals))
+    if not rows:
+        return np.zeros((0, 6), np.float32)
+    return np.concatenate(rows).reshape(-1, 6).astype(np.float32)
+
+
+def _with_normals(tri: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """``(T, 3, 6)``: each vertex of each triangle with its triangle's normal."""
+    return np.concatenate([tri, np.repeat(normal[:, None, :], 3, axis=1)], axis=2)
+
+
 def ground_mesh(size: float) -> Float[np.ndarray, "6 3"]:
     """Two triangles covering ``[-size/2, size/2]²`` at y = 0, facing up (CCW from above)."""
     h = size / 2.0
@@ -204,6 +269,22 @@ void main() {
     f_color = vec4(v_color * (sky + lambert), 1.0);
 }
 """
+
+OBSTACLE_VERTEX = """
+#version 330 core
+uniform mat4 u_view_proj;
+uniform vec3 u_color;
+in vec3 in_position;
+in vec3 in_normal;
+out vec3 v_normal;
+out vec3 v_color;
+void main() {
+    v_normal = in_normal;
+    v_color = u_color;
+    gl_Position = u_view_proj * vec4(in_position, 1.0);
+}
+"""
+"""Obstacle prisms (:func:`prism_mesh`), shaded by :data:`CAPSULE_FRAGMENT`."""
 
 GROUND_VERTEX = """
 #version 330 core

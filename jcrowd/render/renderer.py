@@ -35,6 +35,8 @@ from jcrowd.render.meshes import (
     CAPSULE_VERTEX,
     GROUND_FRAGMENT,
     GROUND_VERTEX,
+    OBSTACLE_COLOR,
+    OBSTACLE_VERTEX,
     capsule_detail,
     capsule_mesh,
     ground_mesh,
@@ -150,6 +152,9 @@ class CrowdRenderer:
         ground_size: side of the square ground plane centred on the origin (m).
         background: clear colour, RGB in [0, 1].
         ground: draw the ground plane and its grid.
+        obstacles: triangles of obstacles and walls to draw every frame, rows ``(x, y, z, nx,
+            ny, nz)`` three per triangle (:func:`~jcrowd.render.meshes.prism_mesh`); None or
+            empty: none.
         detail: per level, the capsule tessellation ``(segments, rings)``; by default
             :func:`~jcrowd.render.meshes.capsule_detail` of the level (64 triangles per bone at
             level 0, fewer for farther levels). Coarser capsules render faster, most of all on
@@ -169,6 +174,7 @@ class CrowdRenderer:
         ground_size: float = 200.0,
         background: tuple[float, float, float] = (0.85, 0.88, 0.92),
         ground: bool = True,
+        obstacles: Float[np.ndarray, "V 6"] | None = None,
         detail: Sequence[tuple[int, int]] | None = None,
     ) -> None:
         meshes = [LevelMesh(tuple(p)) for p in levels]
@@ -189,6 +195,14 @@ class CrowdRenderer:
         self.bone_radius = float(bone_radius)
         self.ground_size = float(ground_size)
         self._draw_ground = bool(ground)
+        self._obstacles = np.zeros((0, 6), np.float32) if obstacles is None else obstacles
+        if self._obstacles.ndim != 2 or self._obstacles.shape[1] != 6 or len(self._obstacles) % 3:
+            raise RenderError(
+                "CrowdRenderer: obstacles: expected rows (x, y, z, nx, ny, nz), three per "
+                f"triangle, found an array of shape {self._obstacles.shape}"
+            )
+        if not np.isfinite(self._obstacles).all():
+            raise RenderError("CrowdRenderer: obstacles: expected finite numbers, found NaN/inf")
         self.samples = samples if samples > 1 else 0
         self._owns_ctx = ctx is None
         self.ctx = make_context() if ctx is None else ctx
@@ -229,6 +243,18 @@ class CrowdRenderer:
         self._objects.append(ground_vbo)
         self._ground_vao = ctx.vertex_array(self._ground_prog, [(ground_vbo, "3f", "in_position")])
         self._objects.append(self._ground_vao)
+        self._obstacle_vao = None
+        if len(self._obstacles):
+            self._obstacle_prog = ctx.program(
+                vertex_shader=OBSTACLE_VERTEX, fragment_shader=CAPSULE_FRAGMENT
+            )
+            self._objects.append(self._obstacle_prog)
+            vbo = ctx.buffer(np.ascontiguousarray(self._obstacles, np.float32).tobytes())
+            self._objects.append(vbo)
+            self._obstacle_vao = ctx.vertex_array(
+                self._obstacle_prog, [(vbo, "3f 3f", "in_position", "in_normal")]
+            )
+            self._objects.append(self._obstacle_vao)
         size = (self.width, self.height)
         self._resolved = ctx.simple_framebuffer(size, components=4)
         self._objects.append(self._resolved)
@@ -288,6 +314,9 @@ class CrowdRenderer:
                 continue
             level.instances.write(level.staging[:n])
             level.vao.render(moderngl.TRIANGLES, instances=n * level.num_bones)
+        if self._obstacle_vao is not None:
+            _uniform(self._obstacle_prog, "u_view_proj").write(vp_bytes)
+            self._obstacle_vao.render(moderngl.TRIANGLES)
         if self._draw_ground:
             _uniform(self._ground_prog, "u_view_proj").write(vp_bytes)
             self._ground_vao.render(moderngl.TRIANGLES)
@@ -335,6 +364,11 @@ class CrowdRenderer:
         _uniform(self._capsule, "u_radius").value = self.bone_radius
         _uniform(self._capsule, "u_light_dir").value = tuple(float(x) for x in _LIGHT_DIR)
         _uniform(self._capsule, "u_ambient").value = _AMBIENT
+        if self._obstacle_vao is not None:
+            o = self._obstacle_prog
+            _uniform(o, "u_light_dir").value = tuple(float(x) for x in _LIGHT_DIR)
+            _uniform(o, "u_ambient").value = _AMBIENT
+            _uniform(o, "u_color").value = OBSTACLE_COLOR
         g = self._ground_prog
         _uniform(g, "u_ground").value = _GROUND
         _uniform(g, "u_line").value = _GRID_LINE

@@ -16,6 +16,7 @@ from jcrowd.scenario.geometry import triangulate as triangulate
 from jcrowd.scenario.layout import MAX_SPAWN_DENSITY as MAX_SPAWN_DENSITY
 from jcrowd.scenario.layout import Layout as Layout
 from jcrowd.scenario.layout import Wall as Wall
+from jcrowd.scenario.layout import blocked_space as blocked_space
 from jcrowd.scenario.layout import check_layout as check_layout
 from jcrowd.scenario.layout import free_space as free_space
 from jcrowd.scenario.layout import region_shape as region_shape

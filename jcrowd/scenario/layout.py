@@ -30,6 +30,7 @@ __all__ = [
     "MAX_SPAWN_DENSITY",
     "Layout",
     "Wall",
+    "blocked_space",
     "check_layout",
     "free_space",
     "region_shape",
@@ -101,6 +102,12 @@ def free_space(ground: Region, layout: Layout) -> shapely.Geometry:
     if blocked:
         space = space.difference(shapely.unary_union(blocked))
     return space
+
+
+def blocked_space(ground: Region, layout: Layout) -> shapely.Geometry:
+    """What of the ground is not free: obstacles, walls and the ground outside ``walkable``
+    (what a renderer draws as solid)."""
+    return region_shape(ground).difference(free_space(ground, layout))
 
 
 def _pieces(space: shapely.Geometry) -> list[shapely.Geometry]:
