@@ -199,3 +199,52 @@ def test_a_block_of_the_crowd_against_the_whole_equals_the_whole():
             others=(f32[0], f32[3]),
         )
         np.testing.assert_allclose(np.asarray(block), np.asarray(whole)[k::2], atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("clump", "spread"),
+    [(0, 200), (40, 160), (200, 0)],
+    ids=["all-sparse", "some-dense", "all-dense"],
+)
+def test_grid_kernel_equals_avoid_with_every_slot(clump, spread):
+    """avoid_in_grid reads the occupied slots (sparse agents) and every slot (dense ones, in a
+    bucket, or everyone when the bucket overflows): the same velocities as avoid over every
+    slot of the 3 × 3 cells, in all three branches. Tolerance 2e-6 m/s: the same float32
+    terms summed in another order. A clump of ``clump`` agents in 2 × 2 m makes them dense
+    (≥ SPARSE_SLOTS = 24 neighbours), ``spread`` agents over 60 × 60 m are sparse; with 200 in
+    the clump more are dense than the bucket's max(64, N/8) slots."""
+    from jcrowd.crowd import SPARSE_SLOTS, avoid_in_grid
+
+    rng = np.random.default_rng(clump + spread)
+    pos = np.concatenate(
+        [rng.uniform(-1, 1, (clump, 2)), rng.uniform(-30, 30, (spread, 2))]
+    ).astype(np.float32)
+    n = len(pos)
+    ang = rng.uniform(0, 2 * np.pi, n)
+    desired = np.stack([np.cos(ang), np.sin(ang)], 1).astype(np.float32)
+    speed, radius = np.full(n, 1.3, np.float32), np.full(n, 0.2, np.float32)
+    alive = np.ones(n, bool)
+    alive[::17] = False  # the dead get 0 and are nobody's neighbour
+    spec = grid_spec((-32.0, -32.0), (32.0, 32.0), 2.0, max_density=40.0)
+    p, rows = jnp.asarray(pos), jnp.arange(n, dtype=jnp.int32)
+    cl = cell_list(spec, p, jnp.asarray(alive))
+    walls, wall_ids = jnp.zeros((0, 2, 2)), jnp.zeros((n, 1), jnp.int32)
+    args = (jnp.asarray(desired), jnp.asarray(speed), jnp.asarray(radius))
+    want, _ = avoid(AvoidanceParams(), p, *args, candidates(spec, cl, p), walls, wall_ids)
+    want = np.where(alive[:, None], np.asarray(want), 0.0)
+    got = avoid_in_grid(
+        AvoidanceParams(),
+        spec,
+        cl,
+        p,
+        *args,
+        jnp.asarray(alive),
+        (p, args[2]),
+        rows,
+        walls,
+        wall_ids,
+    )
+    np.testing.assert_allclose(np.asarray(got), want, atol=2e-6)
+    dense = int(np.sum(alive[:clump])) if clump else 0
+    assert (dense > max(64, n // 8)) == (clump == 200)  # the premise of the third case
+    assert SPARSE_SLOTS == 24

@@ -6,8 +6,10 @@ a recorded agent back into a clip. It never touches files, rendering or the CLI 
 contract checked in CI).
 """
 
+from jcrowd.crowd.avoidance import SPARSE_SLOTS as SPARSE_SLOTS
 from jcrowd.crowd.avoidance import AvoidanceParams as AvoidanceParams
 from jcrowd.crowd.avoidance import avoid as avoid
+from jcrowd.crowd.avoidance import avoid_in_grid as avoid_in_grid
 from jcrowd.crowd.avoidance import avoid_one as avoid_one
 from jcrowd.crowd.avoidance import closest_on_segments as closest_on_segments
 from jcrowd.crowd.clips import CrowdModel as CrowdModel
@@ -71,7 +73,6 @@ from jcrowd.crowd.state import Frame as Frame
 from jcrowd.crowd.state import StepConfig as StepConfig
 from jcrowd.crowd.state import init_state as init_state
 from jcrowd.crowd.state import refresh_far_cores as refresh_far_cores
-from jcrowd.crowd.steering import SPARSE_SLOTS as SPARSE_SLOTS
 from jcrowd.crowd.steering import TURN_RATE as TURN_RATE
 from jcrowd.crowd.steering import aim_point as aim_point
 from jcrowd.crowd.steering import current_field as current_field

@@ -31,10 +31,24 @@ ids (:func:`jcrowd.crowd.neighbours.candidates`, ``N`` for none) and walls as se
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-__all__ = ["AvoidanceParams", "avoid", "avoid_one", "closest_on_segments"]
+from jcrowd.crowd.neighbours import CellList, GridSpec, candidates, compact_candidates
+
+__all__ = [
+    "SPARSE_SLOTS",
+    "AvoidanceParams",
+    "avoid",
+    "avoid_in_grid",
+    "avoid_one",
+    "closest_on_segments",
+]
+
+SPARSE_SLOTS = 24
+"""Neighbour columns read for an agent whose 3 × 3 cells hold fewer agents than this; denser
+agents read every slot (see :func:`avoid_in_grid`)."""
 
 _TINY = 1e-6  # m: distances below this count as coincident (direction left undefined → 0)
 
@@ -174,3 +188,68 @@ def avoid(
     gap = jnp.min(jnp.where(valid & ahead & (lateral <= size), dist - size, jnp.inf), axis=1)
     v = jnp.minimum(speed, jnp.maximum(0.0, gap / params.time_gap))
     return jnp.stack([v * ex, v * ez], axis=1), gap
+
+
+def avoid_in_grid(
+    params: AvoidanceParams,
+    grid: GridSpec,
+    cells: CellList,
+    position: Float[Array, "n 2"],
+    desired: Float[Array, "n 2"],
+    speed: Float[Array, " n"],
+    radius: Float[Array, " n"],
+    alive: Bool[Array, " n"],
+    others: tuple[Array, Array],
+    rows: Int[Array, " n"],
+    walls: Float[Array, "S 2 2"],
+    wall_ids: Int[Array, "n W"],
+) -> Float[Array, "n 2"]:
+    """:func:`avoid` for agents whose neighbours are the crowd in ``cells``, reading only the
+    slots that hold someone. Agents not alive get velocity 0.
+
+    ``others = (positions (P, 2), radii (P,))`` is the crowd ``cells`` was filled from and
+    ``rows`` the agents' own ids in it (their own slot is skipped). Most agents have few
+    neighbours: their occupied slots fit :data:`SPARSE_SLOTS` columns
+    (:func:`~jcrowd.crowd.neighbours.compact_candidates`). The others (count ≥ ``SPARSE_SLOTS``)
+    are compacted into a bucket read with every slot of their 3 × 3 cells; when more than the
+    bucket holds are dense, everyone is (one branch runs). Same velocities as :func:`avoid`
+    with :func:`~jcrowd.crowd.neighbours.candidates`, but for the order of the sums.
+    """
+    n = position.shape[0]
+
+    def velocities(sel: Array, near: Array) -> Array:
+        v, _ = avoid(
+            params,
+            position[sel],
+            desired[sel],
+            speed[sel],
+            radius[sel],
+            near,
+            walls,
+            wall_ids[sel],
+            others=others,
+        )
+        return v
+
+    everyone = jnp.arange(n, dtype=jnp.int32)
+    near, count = compact_candidates(grid, cells, position, SPARSE_SLOTS, rows)
+    sparse = velocities(everyone, near)
+    dense = alive & (count >= SPARSE_SLOTS)
+    n_dense = jnp.sum(dense, dtype=jnp.int32)
+    bucket = min(n, max(64, n // 8))
+
+    def some_dense() -> Array:
+        (idx,) = jnp.nonzero(dense, size=bucket, fill_value=n)
+        safe = jnp.where(idx < n, idx, 0)
+        full = candidates(grid, cells, position[safe], rows[safe])
+        return sparse.at[idx].set(velocities(safe, full), mode="drop")
+
+    def all_dense() -> Array:
+        return velocities(everyone, candidates(grid, cells, position, rows))
+
+    velocity = jax.lax.cond(
+        n_dense == 0,
+        lambda: sparse,
+        lambda: jax.lax.cond(n_dense <= bucket, some_dense, all_dense),
+    )
+    return jnp.where(alive[:, None], velocity, 0.0)

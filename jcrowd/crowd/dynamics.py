@@ -23,7 +23,7 @@ import numpy as np
 import shapely
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.avoidance import AvoidanceParams, avoid
+from jcrowd.crowd.avoidance import AvoidanceParams, avoid_in_grid
 from jcrowd.crowd.navigation import (
     Navigation,
     desired_directions,
@@ -32,7 +32,7 @@ from jcrowd.crowd.navigation import (
     field_values,
     rasterize,
 )
-from jcrowd.crowd.neighbours import GridSpec, candidates, cell_list, grid_spec
+from jcrowd.crowd.neighbours import GridSpec, cell_list, grid_spec
 from jcrowd.errors import JcrowdError
 
 __all__ = [
@@ -102,19 +102,21 @@ def pedestrian_step(
     """Advance every alive agent by ``dt`` seconds (navigation → neighbours → avoidance)."""
     desired = desired_directions(world.nav, peds.target, peds.position)
     cells = cell_list(world.grid, peds.position, peds.alive)
-    near = candidates(world.grid, cells, peds.position)
     own_cell = jnp.minimum(cells.cell, world.grid.num_cells - 1)
-    velocity, _ = avoid(
+    velocity = avoid_in_grid(
         params,
+        world.grid,
+        cells,
         peds.position,
         desired,
         peds.speed,
         peds.radius,
-        near,
+        peds.alive,
+        (peds.position, peds.radius),
+        jnp.arange(peds.position.shape[0], dtype=jnp.int32),
         world.walls,
         world.cell_walls[own_cell],
     )
-    velocity = jnp.where(peds.alive[:, None], velocity, 0.0)
     position = peds.position + velocity * dt
     depth = field_values(world.nav, peds.target, position[:, 0], position[:, 1])
     arrived = peds.alive & (depth <= world.exit_depth)

@@ -20,25 +20,17 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from jcrowd.crowd.avoidance import AvoidanceParams, avoid
+from jcrowd.crowd.avoidance import AvoidanceParams, avoid_in_grid
 from jcrowd.crowd.navigation import desired_directions, field_values
-from jcrowd.crowd.neighbours import (
-    GridSpec,
-    candidates,
-    cell_index,
-    cell_list,
-    compact_candidates,
-)
+from jcrowd.crowd.neighbours import GridSpec, cell_index, cell_list
 from jcrowd.crowd.scene import Scene
 from jcrowd.crowd.state import CrowdState
 from jcrowd.motion.fastmath import sincos
 
 __all__ = [
-    "SPARSE_SLOTS",
     "TURN_RATE",
     "aim_point",
     "current_field",
@@ -46,10 +38,6 @@ __all__ = [
     "turn_towards",
     "waypoint_xz",
 ]
-
-SPARSE_SLOTS = 24
-"""Neighbour columns read for an agent whose 3 × 3 cells hold fewer agents than this; denser
-agents read every slot (see :func:`steer`)."""
 
 TURN_RATE = 3.0
 """Largest body turn rate (rad/s) when the heading follows the velocity."""
@@ -118,46 +106,20 @@ def steer(
         walls, wall_ids = jnp.zeros((0, 2, 2), x.dtype), jnp.zeros((x.shape[0], 1), jnp.int32)
     else:
         walls, wall_ids = scene.walls, scene.cell_walls[cell_index(grid, here)]
-
-    def velocities(sel: Array, near: Array) -> Array:
-        v, _ = avoid(
-            AvoidanceParams(),
-            here[sel],
-            desired[sel],
-            speed[sel],
-            radius[sel],
-            near,
-            walls,
-            wall_ids[sel],
-            others=(pos, rad),
-        )
-        return v
-
-    # Most agents have few neighbours: their occupied slots fit SPARSE_SLOTS columns. The
-    # others (count ≥ SPARSE_SLOTS) are compacted into a bucket read with every slot of their
-    # 3 × 3 cells; when more than the bucket holds are dense, everyone is (one branch runs).
-    everyone = jnp.arange(x.shape[0], dtype=jnp.int32)
-    near, count = compact_candidates(grid, cells, here, SPARSE_SLOTS, rows)
-    sparse = velocities(everyone, near)
-    dense = alive & (count >= SPARSE_SLOTS)
-    n_dense = jnp.sum(dense, dtype=jnp.int32)
-    bucket = min(x.shape[0], max(64, x.shape[0] // 8))
-
-    def some_dense() -> Array:
-        (idx,) = jnp.nonzero(dense, size=bucket, fill_value=x.shape[0])
-        safe = jnp.where(idx < x.shape[0], idx, 0)
-        full = candidates(grid, cells, here[safe], rows[safe])
-        return sparse.at[idx].set(velocities(safe, full), mode="drop")
-
-    def all_dense() -> Array:
-        return velocities(everyone, candidates(grid, cells, here, rows))
-
-    velocity = jax.lax.cond(
-        n_dense == 0,
-        lambda: sparse,
-        lambda: jax.lax.cond(n_dense <= bucket, some_dense, all_dense),
+    velocity = avoid_in_grid(
+        AvoidanceParams(),
+        grid,
+        cells,
+        here,
+        desired,
+        speed,
+        radius,
+        alive,
+        (pos, rad),
+        rows,
+        walls,
+        wall_ids,
     )
-    velocity = jnp.where(alive[:, None], velocity, 0.0)
     return velocity[:, 0], velocity[:, 1], cells.overflow
 
 
