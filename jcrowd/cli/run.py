@@ -5,13 +5,16 @@ The step is compiled once (timed apart as ``compile_s``) and then run ``--steps`
 recorded per step. ``recompiles`` counts compilations after the first (0 is the contract);
 ``crowding_max`` the most agents the crowd dynamics' neighbour grid could not hold in any step
 (0 without ``[dynamics] avoid``); ``spawned``, ``exited`` (reached a goal or the end of an open
-path and left) and ``alive_end`` count agents.
+path and left) and ``alive_end`` count agents; ``agents`` is the number of slots (with
+``[[sources]]``: the pool, :mod:`jcrowd.crowd.pool`), and ``spawn_late`` the source agents due
+by the end that still wait for a free slot.
 
 Recording (``--out run.npz``, written atomically):
 
 - ``roots`` (default): per step and agent the root ``position (x, z)``, ``heading``, ``level``
   (``L`` = not synthesized: culled, or a dot), ``dots`` (in view but below ``lod.min_pixels``
-  or beyond the budget: drawn at the root) and ``alive``.
+  or beyond the budget: drawn at the root) and ``alive``; with ``[[sources]]`` the arrays are
+  per slot, and ``agent`` says which agent each slot holds at each step (−1: none yet).
 - ``visible``: also, per level, the slots' agent ids and joint/End Site positions
   (``points_l``: steps × capacity × points × 3).
 - ``all``: also each agent's clip state (phase, controls of the current and next clip, whether
@@ -216,7 +219,18 @@ def save_recording(path: str | Path, recording: dict[str, np.ndarray]) -> Path:
 
 
 PER_AGENT = frozenset(
-    ("position", "heading", "alive", "tau", "control", "control_next", "has_next", "level", "dots")
+    (
+        "position",
+        "heading",
+        "alive",
+        "agent",
+        "tau",
+        "control",
+        "control_next",
+        "has_next",
+        "level",
+        "dots",
+    )
 )
 """Recorded arrays with one row per agent (the others are per camera or per bucket slot)."""
 
@@ -248,6 +262,8 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
     if record == "all":
         for k in ("tau", "control", "control_next", "has_next"):
             rec[k] = []
+    if sim.pool is not None:
+        rec["agent"] = []
     times, hist = [], np.zeros(nlev + 1, np.int64)
     overflow = deferred = dots = crowding = 0
     with Progress(console=Console(file=sys.stderr), transient=True) as bar:
@@ -261,6 +277,8 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
                 "eye": view.eye,
                 "target": view.target,
             }
+            if sim.pool is not None:
+                snapshot["agent"] = state.agent
             if record == "all":
                 control, _, _ = state.clip("current")
                 control_next, _, _ = state.clip("next")
@@ -330,10 +348,13 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
         "crowding_max": crowding,
         "alive_end": int(np.sum(_fetch(state.alive))),
     }
-    # Everyone is placed at t = 0 (scenarios have no sources yet): spawned = agents, and an
-    # agent that is no longer alive has left through its goal or at its path's end.
-    result["spawned"] = n
-    result["exited"] = n - result["alive_end"]
+    # Agents placed at t = 0 plus those [[sources]] added (each slot counts the agents it has
+    # taken); an agent no longer alive has left through its goal or at its path's end.
+    result["spawned"] = sim.scenario.num_agents + int(np.sum(_fetch(state.next_row)))
+    result["exited"] = result["spawned"] - result["alive_end"]
+    if sim.pool is not None:
+        due = int(np.sum(np.asarray(sim.pool.times) < steps * sim.dt))
+        result["spawn_late"] = sim.scenario.num_agents + due - result["spawned"]
     return result, recording
 
 

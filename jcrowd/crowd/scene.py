@@ -43,7 +43,7 @@ from jcrowd.scenario.layout import free_space, region_shape
 from jcrowd.scenario.schema import Scenario
 from jcrowd.scenario.spawning import Spawn
 
-__all__ = ["MAX_FIELD_BYTES", "NAV_CELL_M", "Scene", "build_scene", "scene_bytes"]
+__all__ = ["MAX_FIELD_BYTES", "NAV_CELL_M", "Scene", "build_scene", "field_ids", "scene_bytes"]
 
 NAV_CELL_M = 0.2
 """Navigation grid cell (m): under the 0.25 m the door widths of the shared experiments (0.5 m
@@ -107,6 +107,16 @@ def scene_bytes(scenario: Scenario) -> int:
     return targets * cells[0] * cells[1] * 4
 
 
+def field_ids(scenario: Scenario, sp: Spawn) -> Int[np.ndarray, "N K"]:
+    """Each agent's field per waypoint: fields are numbered group by group, one per goal or path
+    waypoint (as :func:`build_scene` builds them); rows padded with the last waypoint's."""
+    sizes = [1 if g.path is None else len(g.path.waypoints) for g in scenario.groups]
+    first = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    k = sp.waypoints.shape[1]
+    step = np.minimum(np.arange(k)[None, :], np.maximum(sp.num_waypoints, 1)[:, None] - 1)
+    return (first[sp.group][:, None] + step).astype(np.int32)
+
+
 def build_scene(
     scenario: Scenario, sp: Spawn, grid: GridSpec, reach: float
 ) -> tuple[Scene, Int[np.ndarray, "N K"]]:
@@ -130,18 +140,14 @@ def build_scene(
     fg = field_grid((x0, z0), (x1, z1), NAV_CELL_M)
     free = rasterize(fg, space)
     fields: list[np.ndarray] = []
-    first: list[int] = []
     for row in _targets(scenario, space, reach):
-        first.append(len(fields))
         for key, target in row:
             try:
                 goal = rasterize(fg, target)
                 fields.append(distance_field(fg, free, goal, clearance=CLEARANCE_M))
             except JcrowdError as err:
                 raise ScenarioError(f"{scenario.source}: {key}: {err}") from None
-    k = sp.waypoints.shape[1]
-    step = np.minimum(np.arange(k)[None, :], sp.num_waypoints[:, None] - 1)
-    ids = (np.asarray(first)[sp.group][:, None] + step).astype(np.int32)
+    ids = field_ids(scenario, sp)
     walls = wall_segments(space)
     scene = Scene(
         Navigation(jnp.asarray(np.stack(fields)), fg),

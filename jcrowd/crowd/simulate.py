@@ -16,6 +16,7 @@ distance thresholds.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass, replace
@@ -28,13 +29,14 @@ import numpy as np
 from jcrowd.crowd.clips import CrowdModel, build_crowd_model
 from jcrowd.crowd.lod import CameraView
 from jcrowd.crowd.neighbours import GridSpec, grid_spec
-from jcrowd.crowd.scene import Scene, build_scene
+from jcrowd.crowd.pool import Pool, expected_stay, plan_pool
+from jcrowd.crowd.scene import Scene, build_scene, field_ids
 from jcrowd.crowd.state import CrowdState, Frame, StepConfig, init_state
 from jcrowd.crowd.stepping import default_capacities, step
 from jcrowd.errors import ScenarioError
 from jcrowd.model.motion_model import MotionModel
 from jcrowd.scenario.schema import Scenario, camera_at
-from jcrowd.scenario.spawning import Spawn, spawn
+from jcrowd.scenario.spawning import Spawn, spawn, spawn_sources
 
 __all__ = [
     "OneStepAtATime",
@@ -90,6 +92,7 @@ class Simulation:
     scenario: Scenario
     spawn: Spawn
     scene: Scene | None = None
+    pool: Pool | None = None
 
     @property
     def num_agents(self) -> int:
@@ -141,14 +144,14 @@ class Simulation:
         agents): the state passed in must not be used again; copy it first if it must
         (``jax.tree.map(jnp.copy, state)``).
         """
-        crowd, config, scene = self.crowd, self.config, self.scene
+        crowd, config, scene, pool = self.crowd, self.config, self.scene, self.pool
 
         def run(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
-            return step(crowd, config, state, view, dt, scene=scene)
+            return step(crowd, config, state, view, dt, scene=scene, pool=pool)
 
         devices = jax.devices()
         if len(devices) > 1:
-            run = _per_device_step(crowd, config, devices, scene)
+            run = _per_device_step(crowd, config, devices, scene, pool)
         options = step_compiler_options()
         donated = (0,) if donate else ()
         if options:
@@ -267,7 +270,11 @@ def per_device_config(config: StepConfig, devices: int) -> StepConfig:
 
 
 def _per_device_step(
-    crowd: CrowdModel, config: StepConfig, devices: list[Any], scene: Scene | None = None
+    crowd: CrowdModel,
+    config: StepConfig,
+    devices: list[Any],
+    scene: Scene | None = None,
+    pool: Pool | None = None,
 ) -> Any:
     """The step over several devices: each runs it on its own block of agents.
 
@@ -304,7 +311,7 @@ def _per_device_step(
         device = jax.lax.axis_index("agents")
         # The block's rows in the gathered crowd: device k's block follows devices 0 … k − 1.
         rows = device * n_local + jnp.arange(n_local, dtype=jnp.int32)
-        new, frame = step(crowd, local_config, state, view, dt, gather, rows, scene)
+        new, frame = step(crowd, local_config, state, view, dt, gather, rows, scene, pool)
         slots = tuple(  # local slot s holds agent s·K + k (agent_order)
             jnp.where(ok, s * k + device, n_local * k).astype(s.dtype)
             for s, ok in zip(frame.slots, frame.valid, strict=True)
@@ -385,7 +392,17 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
     crowd = build_crowd_model(model)
     levels = len(model.levels)
     lod = scenario.lod
-    agents = scenario.num_agents
+    sp = spawn(scenario)
+    sources, times = spawn_sources(scenario)
+    queue = None
+    if len(times):
+        stay = [
+            expected_stay(s.position, s.waypoints, s.num_waypoints, s.loop, s.speed)
+            for s in (sp, sources)
+        ]
+        queue, slot_group = plan_pool(stay[0], sp.group, times, stay[1], sources.group)
+        sp = _slots(sp, sources, queue, slot_group)
+    agents = sp.num_agents
     if lod.capacities is not None and len(lod.capacities) != levels:
         raise ScenarioError(
             f"{scenario.source}: lod.capacities: expected {levels} integers (one per level of "
@@ -410,11 +427,31 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         grid=_neighbour_grid(scenario) if scenario.dynamics.avoid else None,
     )
     config.check(levels)
-    sp = spawn(scenario)
     scene = None
     if not scenario.layout.empty:
-        scene, fields = build_scene(scenario, sp, cast(GridSpec, config.grid), config.reach)
-    arrays = {
+        scene, _ = build_scene(scenario, sp, cast(GridSpec, config.grid), config.reach)
+    key_slots, key_sources = jax.random.split(jax.random.key(scenario.seed))
+    arrays = _state_arrays(scenario, sp, scene is not None)
+    pool = None
+    if queue is not None:
+        n0 = scenario.num_agents
+        arrays["queue"] = queue
+        arrays["alive"] = np.arange(agents) < n0
+        arrays["agent"] = np.where(np.arange(agents) < n0, np.arange(agents), -1)
+        reservoir = init_state(
+            crowd, _state_arrays(scenario, sources, scene is not None), key_sources
+        )
+        per_step = np.bincount(np.floor(times * scenario.fps).astype(np.int64)).max()
+        pool = Pool(reservoir, jnp.asarray(times, jnp.float32), n0, int(2 * per_step + 8))
+    state = init_state(
+        crowd, arrays, key_slots if pool is not None else jax.random.key(scenario.seed)
+    )
+    return Simulation(crowd, config, scenario, sp, scene, pool), state
+
+
+def _state_arrays(scenario: Scenario, sp: Spawn, fields: bool) -> dict[str, Any]:
+    """The spawn's columns as :func:`init_state` takes them (device arrays)."""
+    arrays: dict[str, Any] = {
         "position": sp.position,
         "heading": sp.heading,
         "height": sp.height,
@@ -424,14 +461,23 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         "loop": sp.loop,
         "radius": np.full(sp.num_agents, scenario.dynamics.radius, np.float32),
     }
-    if scene is not None:
-        arrays["field"] = fields
-    state = init_state(
-        crowd,
-        {k: jnp.asarray(np.asarray(v)) for k, v in arrays.items()},
-        jax.random.key(scenario.seed),
-    )
-    return Simulation(crowd, config, scenario, sp, scene), state
+    if fields:
+        arrays["field"] = field_ids(scenario, sp)
+    return {k: jnp.asarray(np.asarray(v)) for k, v in arrays.items()}
+
+
+def _slots(sp: Spawn, sources: Spawn, queue: np.ndarray, slot_group: np.ndarray) -> Spawn:
+    """The pool's slots at t = 0: the agents placed then, and each further slot filled with its
+    first queued source agent (not alive until it appears; padding slots with the first source
+    agent, never alive)."""
+    extra = queue[sp.num_agents :, 0]
+    rows = np.where(extra >= 0, extra, 0)
+    cols = {
+        f.name: np.concatenate([getattr(sp, f.name), getattr(sources, f.name)[rows]])
+        for f in dataclasses.fields(Spawn)
+    }
+    cols["group"] = np.concatenate([sp.group, slot_group[sp.num_agents :]]).astype(np.int32)
+    return Spawn(**cols)
 
 
 def shard_state(state: CrowdState) -> CrowdState:

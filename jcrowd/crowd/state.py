@@ -139,6 +139,13 @@ class CrowdState(eqx.Module):
     vx: Float[Array, " N"]  # simulated velocity (m/s) when the step avoids (else the spawn one)
     vz: Float[Array, " N"]
     radius: Float[Array, " N"]  # m, the body disc the crowd dynamics keeps apart
+    # The slot, not its agent (jcrowd.crowd.pool): time since the start (s, the same in every
+    # slot), the source agents queued for it (reservoir rows, −1 padding; width 0 without
+    # sources), how many of them it has taken, and the agent it holds (−1: none yet).
+    clock: Float[Array, " N"]
+    queue: Int[Array, "N Q"]
+    next_row: Int[Array, " N"]
+    agent: Int[Array, " N"]
     # Devices whose blocks hold the agents interleaved (jcrowd.crowd.simulate.shard_state): with K
     # > 1 position p of every array is agent agent_order(N, K)[p], not agent p.
     interleave: int = eqx.field(static=True, default=1)
@@ -203,8 +210,10 @@ def init_state(
 
     ``spawn`` holds ``position (N, 2)``, ``heading``, ``height``, ``speed`` ``(N,)``,
     ``waypoints (N, K, 2)``, ``num_waypoints (N,)``, ``loop (N,)``, and optionally ``radius``
-    ``(N,)`` (default :data:`DEFAULT_RADIUS`) and ``field`` ``(N, K)`` (each waypoint's
-    navigation field, :func:`jcrowd.crowd.scene.build_scene`; default −1: none).
+    ``(N,)`` (default :data:`DEFAULT_RADIUS`), ``field`` ``(N, K)`` (each waypoint's
+    navigation field, :func:`jcrowd.crowd.scene.build_scene`; default −1: none), and for a pool
+    with sources (:mod:`jcrowd.crowd.pool`) ``queue`` ``(N, Q)``, ``agent`` and ``alive``
+    ``(N,)`` (defaults: no queue, agent ``i`` in slot ``i``, everyone alive).
     """
     n = spawn["position"].shape[0]
     heading = jnp.asarray(spawn["heading"], jnp.float32)
@@ -239,7 +248,7 @@ def init_state(
         level=jnp.zeros(n, jnp.int32),
         far_core=jnp.zeros((n, int(np.prod(cm.decoders.levels[-1].ranks))), jnp.float32),
         far_valid=jnp.zeros(n, bool),
-        alive=jnp.ones(n, bool),
+        alive=jnp.asarray(spawn.get("alive", np.ones(n, bool)), bool),
         height=height,
         speed=speed,
         waypoints=waypoints,
@@ -250,6 +259,10 @@ def init_state(
         vx=speed * jnp.sin(heading),
         vz=speed * jnp.cos(heading),
         radius=jnp.asarray(spawn.get("radius", np.full(n, DEFAULT_RADIUS)), jnp.float32),
+        clock=jnp.zeros(n, jnp.float32),
+        queue=jnp.asarray(spawn.get("queue", np.zeros((n, 0))), jnp.int32),
+        next_row=jnp.zeros(n, jnp.int32),
+        agent=jnp.asarray(spawn.get("agent", np.arange(n)), jnp.int32),
     )
 
 

@@ -56,6 +56,7 @@ from jcrowd.crowd.lod import (
     screen_height_px,
 )
 from jcrowd.crowd.neighbours import GridSpec
+from jcrowd.crowd.pool import Pool, spawn_due
 from jcrowd.crowd.scene import Scene
 from jcrowd.crowd.schedule import schedule
 from jcrowd.crowd.state import CrowdState, Frame, StepConfig, refresh_far_cores
@@ -231,8 +232,12 @@ def step(
     gather: Callable[[Array], Array] | None = None,
     ids: Array | None = None,
     scene: Scene | None = None,
+    pool: Pool | None = None,
 ) -> tuple[CrowdState, Frame]:
     """Advance the crowd by ``dt`` seconds and return the frame at the step's start.
+
+    ``pool``: source agents waiting for slots (:mod:`jcrowd.crowd.pool`); those due appear
+    before the frame is made.
 
     ``gather`` and ``ids``: on one device of several, how the dynamics see the whole crowd
     (:func:`jcrowd.crowd.steering.steer`); unused without ``config.avoid``. ``scene``: the
@@ -240,6 +245,8 @@ def step(
     """
     nlev = len(cm.decoders.levels)
     dt = jnp.asarray(dt, jnp.float32)
+    if pool is not None:
+        state = spawn_due(state, pool.reservoir, pool.times, pool.first_id, pool.budget)
     centre = (state.x, 0.55 * state.height, state.z)
     visible = state.alive & in_frustum(view, centre, radius=0.6 * 1.9)
     dist = jnp.sqrt(sum((c - view.eye[k]) ** 2 for k, c in enumerate(centre)))
@@ -308,6 +315,8 @@ def step(
     state = eqx.tree_at(lambda s: (s.x, s.z, s.heading, s.tau, s.vx, s.vz), state, moved)
     state, deferred = schedule(cm, config, state, buckets.level < nlev, scene)
     state = eqx.tree_at(lambda s: s.level, state, buckets.level)
+    if pool is not None:
+        state = eqx.tree_at(lambda s: s.clock, state, state.clock + dt)
     frame = Frame(
         buckets.slots,
         buckets.valid,

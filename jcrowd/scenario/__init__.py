@@ -30,6 +30,7 @@ from jcrowd.scenario.schema import Group as Group
 from jcrowd.scenario.schema import LodSettings as LodSettings
 from jcrowd.scenario.schema import Path as Path
 from jcrowd.scenario.schema import Scenario as Scenario
+from jcrowd.scenario.schema import Source as Source
 from jcrowd.scenario.schema import camera_at as camera_at
 from jcrowd.scenario.spawning import LATERAL_JITTER_M as LATERAL_JITTER_M
 from jcrowd.scenario.spawning import Spawn as Spawn

@@ -114,7 +114,7 @@ def _pieces(space: shapely.Geometry) -> list[shapely.Geometry]:
     return [g for g in getattr(space, "geoms", [space]) if not g.is_empty and g.area > 0]
 
 
-def check_layout(ground: Region, layout: Layout, groups: Sequence) -> None:
+def check_layout(ground: Region, layout: Layout, groups: Sequence, sources: Sequence = ()) -> None:
     """Check every group against the free space (keys relative to the scenario's top level).
 
     Raises:
@@ -126,6 +126,15 @@ def check_layout(ground: Region, layout: Layout, groups: Sequence) -> None:
         require(inside.area > 0, "walkable", "a region overlapping the ground", Raw("none"))
     space = free_space(ground, layout)
     pieces = _pieces(space)
+    for i, src in enumerate(sources):
+        if src.region is not None:
+            free = region_shape(src.region).intersection(space)
+            require(
+                free.area > 0,
+                f"sources[{i}].region",
+                "a region with free space (not all inside obstacles)",
+                Raw("none"),
+            )
     for i, g in enumerate(groups):
         spawn = region_shape(g.spawn).intersection(space)
         key = f"groups[{i}].spawn"

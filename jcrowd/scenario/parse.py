@@ -28,6 +28,7 @@ from jcrowd.scenario.schema import (
     LodSettings,
     Path,
     Scenario,
+    Source,
 )
 
 __all__ = ["load_scenario", "parse_scenario"]
@@ -46,6 +47,7 @@ _TOP = (
     "walls",
     "walkable",
     "dynamics",
+    "sources",
 )
 _GROUP = ("name", "count", "spawn", "path", "goal", "speed", "height", "color")
 _CAMERA = ("eye", "target", "keys", "fov", "width", "height", "near", "far")
@@ -115,6 +117,21 @@ class _Reader:
         if "goal" in t:
             kw["goal"] = self.region(t["goal"], f"{path}.goal")
         return self.build(path, Group, **kw)
+
+    def sources(self, doc: dict[str, Any]) -> tuple[Source, ...]:
+        out = []
+        for i, value in enumerate(self.tables(doc, "sources")):
+            at = f"sources[{i}]"
+            t = self.table(
+                value, at, ("group", "rate", "start", "stop", "count", "region"), ("group", "rate")
+            )
+            kw: dict[str, Any] = {
+                k: t[k] for k in ("group", "rate", "start", "stop", "count") if k in t
+            }
+            if "region" in t:
+                kw["region"] = self.region(t["region"], f"{at}.region")
+            out.append(self.build(at, Source, **kw))
+        return tuple(out)
 
     def tables(self, doc: dict[str, Any], key: str) -> list[Any]:
         """The ``[[key]]`` tables of the document (none when absent)."""
@@ -229,6 +246,7 @@ def parse_scenario(
             DynamicsSettings,
             **r.table(doc.get("dynamics", {}), "dynamics", ("avoid", "radius")),
         ),
+        sources=r.sources(doc),
     )
 
 

@@ -51,6 +51,7 @@ __all__ = [
     "LodSettings",
     "Path",
     "Scenario",
+    "Source",
     "camera_at",
 ]
 
@@ -111,7 +112,7 @@ class Group:
     def __post_init__(self) -> None:
         put = object.__setattr__
         require(isinstance(self.name, str) and self.name, "name", "a non-empty string", self.name)
-        ok = is_int(self.count) and self.count > 0
+        ok = is_int(self.count) and self.count >= 0  # 0: fed only by [[sources]] (Scenario)
         require(ok, "count", "a positive integer", self.count)
         put(self, "count", int(self.count))
         if (self.path is None) == (self.goal is None):
@@ -123,6 +124,48 @@ class Group:
             rgb = reals(self.color, "color", "[r, g, b] in [0, 1]", 3)
             require(np.all((rgb >= 0) & (rgb <= 1)), "color", "[r, g, b] in [0, 1]", self.color)
             put(self, "color", (float(rgb[0]), float(rgb[1]), float(rgb[2])))
+
+
+@dataclass(frozen=True, eq=False)
+class Source:
+    """Agents of group ``group`` (its path or goal, speed, height and colour) appearing over
+    time: ``rate`` per second (> 0) from ``start`` (s, ≥ 0) until ``stop`` (s) or until ``count``
+    have appeared, whichever comes first (neither: until the scenario ends), each at a uniform
+    point of ``region`` (None: the group's spawn region). Agent ``k`` (0, 1, …) of a source
+    appears at ``start + k / rate``."""
+
+    group: str
+    rate: float
+    start: float = 0.0
+    stop: float | None = None
+    count: int | None = None
+    region: Region | None = None
+
+    def __post_init__(self) -> None:
+        put = object.__setattr__
+        g = self.group
+        require(isinstance(g, str) and g, "group", "the name of a group", g)
+        require(real(self.rate) and self.rate > 0, "rate", "agents per second > 0", self.rate)
+        put(self, "rate", float(self.rate))
+        require(real(self.start) and self.start >= 0, "start", "a time ≥ 0 (s)", self.start)
+        put(self, "start", float(self.start))
+        if self.stop is not None:
+            ok = real(self.stop) and self.stop > self.start
+            require(ok, "stop", f"a time after start ({self.start:g} s)", self.stop)
+            put(self, "stop", float(self.stop))
+        if self.count is not None:
+            require(
+                is_int(self.count) and self.count > 0, "count", "a positive integer", self.count
+            )
+            put(self, "count", int(self.count))
+
+    def times(self, duration: float) -> Float[np.ndarray, " K"]:
+        """When each of its agents appears (s), within ``[0, duration)``."""
+        end = min(duration, self.stop if self.stop is not None else math.inf)
+        k = max(0, math.ceil((end - self.start) * self.rate - 1e-9))
+        if self.count is not None:
+            k = min(k, self.count)
+        return self.start + np.arange(k) / self.rate
 
 
 @dataclass(frozen=True, eq=False)
@@ -272,10 +315,16 @@ class Scenario:
     lod: LodSettings = field(default_factory=LodSettings)
     layout: Layout = field(default_factory=Layout)
     dynamics: DynamicsSettings = field(default_factory=DynamicsSettings)
+    sources: tuple[Source, ...] = ()
 
     @property
     def num_agents(self) -> int:
+        """Agents placed at t = 0 (sources add more over time)."""
         return sum(g.count for g in self.groups)
+
+    def group_index(self, name: str) -> int:
+        """The index of the group called ``name``."""
+        return next(i for i, g in enumerate(self.groups) if g.name == name)
 
     def __post_init__(self) -> None:
         require(is_int(self.seed) and self.seed >= 0, "seed", "an integer ≥ 0", self.seed)
@@ -304,6 +353,30 @@ class Scenario:
                 k = int(np.argmax(out))
                 key = f"groups[{i}].path.waypoints[{k}]"
                 require(not out.any(), key, f"a point {inside}", g.path.waypoints[k])
+        object.__setattr__(self, "sources", tuple(self.sources))
+        fed: set[str] = set()
+        for i, s in enumerate(self.sources):
+            require(s.group in names, f"sources[{i}].group", "the name of a group", s.group)
+            fed.add(s.group)
+            if s.region is not None:
+                a, b = s.region.bounds()
+                found = f"one spanning x in [{a[0]:g}, {b[0]:g}], z in [{a[1]:g}, {b[1]:g}]"
+                ok = np.all(a >= lo) and np.all(b <= hi)
+                require(ok, f"sources[{i}].region", f"a region {inside}", Raw(found))
+            require(
+                s.start < self.duration_s,
+                f"sources[{i}].start",
+                f"a time before the scenario ends ({self.duration_s:g} s)",
+                s.start,
+            )
+        for i, g in enumerate(self.groups):
+            if g.count == 0:
+                require(
+                    g.name in fed,
+                    f"groups[{i}].count",
+                    "a positive integer",
+                    Raw("0 (0 only for a group that [[sources]] feed)"),
+                )
         if not self.layout.empty:
             require(
                 self.dynamics.avoid,
@@ -312,7 +385,7 @@ class Scenario:
                 "dynamics route agents around them)",
                 self.dynamics.avoid,
             )
-            check_layout(self.ground, self.layout, self.groups)
+            check_layout(self.ground, self.layout, self.groups, self.sources)
 
 
 def camera_at(camera: Camera, t: float) -> tuple[Float[np.ndarray, " 3"], Float[np.ndarray, " 3"]]:

@@ -20,7 +20,7 @@ from jcrowd.scenario.geometry import Region
 from jcrowd.scenario.layout import free_space
 from jcrowd.scenario.schema import Scenario
 
-__all__ = ["LATERAL_JITTER_M", "Spawn", "spawn"]
+__all__ = ["LATERAL_JITTER_M", "Spawn", "spawn", "spawn_empty", "spawn_sources"]
 
 LATERAL_JITTER_M = 1.0
 """Largest lateral offset of an agent's copy of its group's path (metres)."""
@@ -203,8 +203,6 @@ def spawn(scenario: Scenario) -> Spawn:
     free = None if scenario.layout.empty else free_space(scenario.ground, scenario.layout)
     gap = 2 * scenario.dynamics.radius if scenario.dynamics.avoid else 0.0
     placed: dict[tuple[int, int], list[np.ndarray]] = {}
-    k_max = max(1 if g.path is None else len(g.path.waypoints) for g in groups)
-    lo, hi = scenario.ground.bounds()
     streams = np.random.SeedSequence(scenario.seed).spawn(len(groups))
     parts: list[tuple[np.ndarray, ...]] = []
     for index, (group, stream) in enumerate(zip(groups, streams, strict=True)):
@@ -214,35 +212,90 @@ def spawn(scenario: Scenario) -> Spawn:
             position = _spread(group.spawn, rng, n, free, gap, placed)
         else:
             position = _sample_free(group.spawn, rng, n, free)
-        speed = rng.uniform(group.speed[0], group.speed[1], size=n)
-        height = rng.uniform(group.height[0], group.height[1], size=n)
-        if group.path is None:  # Group's check makes sure it then has a goal
-            goal = cast("Region", group.goal)
-            waypoints, loop = goal.sample(rng, n)[:, None, :], False
-        else:
-            offsets = rng.uniform(-LATERAL_JITTER_M, LATERAL_JITTER_M, size=n)
-            base = group.path.waypoints
-            moved = np.clip(_offset_waypoints(base, group.path.loop, offsets, position), lo, hi)
-            if group.path.loop:  # each agent joins the loop where it is nearest, walking on
-                order = (_loop_entry(base, position)[:, None] + np.arange(len(base))) % len(base)
-                moved = np.take_along_axis(moved, order[..., None], axis=1)
-            waypoints, loop = moved, group.path.loop
-        to_first = waypoints[:, 0] - position
-        k = waypoints.shape[1]
-        pad = np.repeat(waypoints[:, -1:], k_max - k, axis=1)
-        color = _PALETTE[index % len(_PALETTE)] if group.color is None else group.color
-        parts.append(
-            (
-                position,
-                np.arctan2(to_first[:, 0], to_first[:, 1]),
-                np.full(n, index, np.int32),
-                height,
-                speed,
-                np.concatenate([waypoints, pad], axis=1),
-                np.full(n, k, np.int32),
-                np.full(n, loop, bool),
-                np.broadcast_to(np.asarray(color, np.float32), (n, 3)),
-            )
-        )
+        parts.append(_agents(scenario, index, rng, position))
     columns = [np.concatenate(column) for column in zip(*parts, strict=True)]
     return Spawn(*columns)
+
+
+def _agents(
+    scenario: Scenario, index: int, rng: np.random.Generator, position: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """The columns of :class:`Spawn` for agents of group ``index`` starting at ``position``:
+    speed, height and path (or goal point) drawn from ``rng`` as :func:`spawn` says."""
+    group = scenario.groups[index]
+    n = len(position)
+    lo, hi = scenario.ground.bounds()
+    k_max = max(1 if g.path is None else len(g.path.waypoints) for g in scenario.groups)
+    speed = rng.uniform(group.speed[0], group.speed[1], size=n)
+    height = rng.uniform(group.height[0], group.height[1], size=n)
+    if group.path is None:  # Group's check makes sure it then has a goal
+        goal = cast("Region", group.goal)
+        waypoints, loop = goal.sample(rng, n)[:, None, :], False
+    else:
+        offsets = rng.uniform(-LATERAL_JITTER_M, LATERAL_JITTER_M, size=n)
+        base = group.path.waypoints
+        moved = np.clip(_offset_waypoints(base, group.path.loop, offsets, position), lo, hi)
+        if group.path.loop:  # each agent joins the loop where it is nearest, walking on
+            order = (_loop_entry(base, position)[:, None] + np.arange(len(base))) % len(base)
+            moved = np.take_along_axis(moved, order[..., None], axis=1)
+        waypoints, loop = moved, group.path.loop
+    to_first = waypoints[:, 0] - position
+    k = waypoints.shape[1]
+    pad = np.repeat(waypoints[:, -1:], k_max - k, axis=1)
+    color = _PALETTE[index % len(_PALETTE)] if group.color is None else group.color
+    return (
+        position,
+        np.arctan2(to_first[:, 0], to_first[:, 1]),
+        np.full(n, index, np.int32),
+        height,
+        speed,
+        np.concatenate([waypoints, pad], axis=1),
+        np.full(n, k, np.int32),
+        np.full(n, loop, bool),
+        np.broadcast_to(np.asarray(color, np.float32), (n, 3)),
+    )
+
+
+def spawn_sources(scenario: Scenario) -> tuple[Spawn, Float[np.ndarray, " R"]]:
+    """Every agent the scenario's ``[[sources]]`` will add, and when (s), in order of appearance.
+
+    Each source draws from its own stream (after the groups' streams, so adding a source does
+    not move the agents placed at t = 0): positions uniform over its region's free part (no
+    spacing: an agent may appear touching one already there, and the dynamics push them apart),
+    then speed, height and path as the group's agents at t = 0 (:func:`spawn`).
+    """
+    groups, sources = scenario.groups, scenario.sources
+    free = None if scenario.layout.empty else free_space(scenario.ground, scenario.layout)
+    streams = np.random.SeedSequence(scenario.seed).spawn(len(groups) + len(sources))
+    parts, times = [], []
+    for src, stream in zip(sources, streams[len(groups) :], strict=True):
+        rng = np.random.default_rng(stream)
+        index = scenario.group_index(src.group)
+        t = src.times(scenario.duration_s)
+        region = src.region if src.region is not None else groups[index].spawn
+        position = _sample_free(region, rng, len(t), free)
+        parts.append(_agents(scenario, index, rng, position))
+        times.append(t)
+    if not parts:
+        empty = spawn_empty(scenario)
+        return empty, np.zeros(0)
+    columns = [np.concatenate(column) for column in zip(*parts, strict=True)]
+    when = np.concatenate(times)
+    order = np.argsort(when, kind="stable")
+    return Spawn(*(c[order] for c in columns)), when[order]
+
+
+def spawn_empty(scenario: Scenario) -> Spawn:
+    """A :class:`Spawn` of no agents, shaped like the scenario's."""
+    k_max = max(1 if g.path is None else len(g.path.waypoints) for g in scenario.groups)
+    return Spawn(
+        np.zeros((0, 2)),
+        np.zeros(0),
+        np.zeros(0, np.int32),
+        np.zeros(0),
+        np.zeros(0),
+        np.zeros((0, k_max, 2)),
+        np.zeros(0, np.int32),
+        np.zeros(0, bool),
+        np.zeros((0, 3), np.float32),
+    )
