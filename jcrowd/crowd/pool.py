@@ -15,8 +15,11 @@ Stepping (:func:`spawn_due`, inside the compiled step): a slot whose agent is go
 next queued agent's time has come takes that agent — every per-agent field copied from the
 *reservoir*, a state built once for all source agents (so their first clips are chosen as for
 the agents at t = 0). At most ``budget`` slots take an agent per step; when an agent stays
-longer than expected, the one queued behind it waits until the slot is free (appearing late,
-never lost: ``frame``-independent, reported as ``spawn_late`` by ``jcrowd run``). The state's
+longer than expected, the one queued behind it waits until the slot is free, and an agent whose
+disc would overlap someone already there (or appearing in the same step) waits a step and
+tries again — late, never lost, never on top of anyone (``jcrowd run`` reports the agents
+still waiting as ``spawn_late``). With the crowd split over devices the overlap test sees the
+slot's own device's agents only. The state's
 ``agent`` says which agent each slot holds (ids: t = 0 agents ``0 … N0 − 1``, source agents
 ``N0 + row`` in order of appearance; ``−1`` before a slot's first agent).
 """
@@ -115,8 +118,9 @@ def spawn_due(
     budget: int,
 ) -> CrowdState:
     """Slots whose agent is gone take their next queued agent once its time has come (at most
-    ``budget`` slots per call): every per-agent field from the reservoir's row, ``alive``, and
-    the slot's ``agent`` = ``first_id + row``."""
+    ``budget`` slots per call, and not while the agent's disc would overlap an alive agent's or
+    that of an agent taken earlier in the call): every per-agent field from the reservoir's
+    row, ``alive``, and the slot's ``agent`` = ``first_id + row``."""
     n, q = state.num_agents, state.queue.shape[1]
     at = jnp.minimum(state.next_row, q - 1)
     row = jnp.take_along_axis(state.queue, at[:, None], axis=1)[:, 0]
@@ -124,6 +128,17 @@ def spawn_due(
     due = ~state.alive & queued & (times[jnp.maximum(row, 0)] <= state.clock)
     (idx,) = jnp.nonzero(due, size=min(budget, n), fill_value=n)
     rows = row[jnp.minimum(idx, n - 1)]
+    # An agent whose disc would overlap someone's waits (its slot tries again next step): the
+    # agents alive in this block, and the agents appearing before it in this call.
+    safe_rows = jnp.maximum(rows, 0)
+    rx, rz, rr = (getattr(reservoir, k)[safe_rows] for k in ("x", "z", "radius"))
+    d2 = (rx[:, None] - state.x[None, :]) ** 2 + (rz[:, None] - state.z[None, :]) ** 2
+    reach = rr[:, None] + state.radius[None, :]
+    blocked = jnp.any(state.alive[None, :] & (d2 < reach * reach), axis=1)
+    e2 = (rx[:, None] - rx[None, :]) ** 2 + (rz[:, None] - rz[None, :]) ** 2
+    earlier = jnp.tril(jnp.ones((len(idx), len(idx)), bool), k=-1) & (idx < n)[None, :]
+    blocked |= jnp.any(earlier & (e2 < (rr[:, None] + rr[None, :]) ** 2), axis=1)
+    idx = jnp.where(blocked, n, idx)
     names = [f.name for f in fields(CrowdState) if f.name not in (*POOL_FIELDS, "interleave")]
     new = [
         getattr(state, k).at[idx].set(getattr(reservoir, k)[jnp.maximum(rows, 0)], mode="drop")

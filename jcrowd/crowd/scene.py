@@ -13,8 +13,9 @@ when a scenario is prepared:
   free space. One field per group and waypoint; agents' own waypoints (offset sideways by up to
   ``LATERAL_JITTER_M`` from the group's) share it.
 - Inside its target (field ≤ 0) an agent heads straight at its own waypoint; outside, down the
-  field. A waypoint counts as reached only inside its target, so a waypoint behind a thin wall
-  within ``reach`` is not reached through the wall.
+  field. A waypoint counts as reached on entering its target (a goal region is thus an exit:
+  agents leave as they step into it), so a waypoint behind a thin wall within ``reach`` is not
+  reached through the wall.
 - Walls: the free space's boundary segments; per neighbour-grid cell the segments within
   :data:`~jcrowd.crowd.dynamics.WALL_REACH_M` of it (the standalone dynamics' table).
 

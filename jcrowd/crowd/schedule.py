@@ -31,8 +31,9 @@ def schedule(
 ) -> tuple[CrowdState, Array]:
     """Waypoints, next-clip choice at mid-cycle (bounded per step) and clip hand-over.
 
-    With a ``scene`` a waypoint is reached only inside its navigation target (field ≤ 0, see
-    :mod:`jcrowd.crowd.scene`), not through a wall.
+    With a ``scene`` a waypoint is reached on entering its navigation target (field ≤ 0, see
+    :mod:`jcrowd.crowd.scene`: the reach disc cut by walls, or the goal region, so a goal
+    region works as an exit), never through a wall.
 
     Agents synthesized this step get a kriged next clip, the others the nearest captured cycle
     to the controls they aim at (:func:`jcrowd.crowd.clips.next_clips_lod`).
@@ -41,9 +42,8 @@ def schedule(
     last = float(cm.frames - 1)
     tx, tz = waypoint_xz(state.waypoints, state.waypoint)
     near = (tx - state.x) ** 2 + (tz - state.z) ** 2 < config.reach**2
-    if scene is not None:
-        inside = field_values(scene.nav, current_field(state), state.x, state.z) <= 0.0
-        near = near & inside
+    if scene is not None:  # reached on entering the target (a goal region: the exit)
+        near = field_values(scene.nav, current_field(state), state.x, state.z) <= 0.0
     reached = state.alive & near
     wp = state.waypoint + reached.astype(jnp.int32)
     done = wp >= state.num_waypoints
