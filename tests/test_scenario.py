@@ -36,6 +36,8 @@ EXPECTED_COUNTS = {  # what each example promises (examples/README.md)
     "stadium": (2000, 2),
     "procession": (580, 3),
     "city_100k": (100_000, 7),
+    "entrance": (75, 1),
+    "station": (0, 2),  # everyone comes from [[sources]]
 }
 
 # An arrow-shaped, non-convex polygon: a 10 × 4 shaft and a head, reflex vertices at the joins.

@@ -92,7 +92,7 @@ def _sample_free(
     if free is None:
         return region.sample(rng, n)
     shapely.prepare(free)
-    kept: list[np.ndarray] = []
+    kept: list[np.ndarray] = [np.zeros((0, 2))]
     count = 0
     while count < n:
         p = region.sample(rng, max(2 * (n - count), 16))
