@@ -20,8 +20,9 @@ Sections (``--sections``, default all):
   measurement area over the run's steady state; Weidmann's curve as a second reference.
 - ``speed``: median ms per step of the dynamics alone at 0.5 agents/m² walking across a square
   with 2 m pillars every 25 m (the issue's "open area with obstacles"; JuPedSim's step cost
-  grows with the obstacles) and across the same square without them, jcrowd (one CPU device)
-  vs JuPedSim.
+  grows with the obstacles) and across the same square without them, jcrowd vs JuPedSim (one
+  core). ``--cpu-devices K`` splits jcrowd's step over K CPU devices
+  (:func:`jcrowd.crowd.split_pedestrian_step`; default 1); the row says how many.
 
 Safety over every jcrowd scene: ``min_gap_ratio`` (smallest centre distance ÷ (r_i + r_j)),
 ``inside_obstacle`` (agent-frames whose centre is outside the walkable area), ``nan``, and
@@ -50,7 +51,14 @@ import pedpy
 import shapely
 from common import ROOT, machine, report
 
-from jcrowd.crowd import AvoidanceParams, Pedestrians, build_world, pedestrian_step
+from jcrowd.cli.run import use_cpu_devices
+from jcrowd.crowd import (
+    AvoidanceParams,
+    Pedestrians,
+    build_world,
+    pedestrian_step,
+    split_pedestrian_step,
+)
 
 DATA = ROOT.parent / "shared" / "data" / "pedestrians"
 DT = 1.0 / 30.0
@@ -508,14 +516,15 @@ def speed(sizes, out, pillars=True):
             jnp.full(n, RADIUS, jnp.float32),
             jnp.ones(n, bool),
         )
-        step = jax.jit(pedestrian_step)
+        # Split over the CPU devices (--cpu-devices; JuPedSim runs on one core either way).
+        step = split_pedestrian_step() if jax.device_count() > 1 else jax.jit(pedestrian_step)
         params = AvoidanceParams()
-        peds, _ = step(params, world, peds, DT)
+        peds, _ = step(params, world, peds, jnp.float32(DT))
         jax.block_until_ready(peds)
         ts = []
         for _ in range(10):
             t0 = time.perf_counter()
-            peds, _ = step(params, world, peds, DT)
+            peds, _ = step(params, world, peds, jnp.float32(DT))
             jax.block_until_ready(peds)
             ts.append(time.perf_counter() - t0)
         ours[size] = float(np.median(ts))
@@ -669,13 +678,16 @@ def main() -> None:
     ap.add_argument("--sizes", default="1000,10000,50000,100000")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--no-record", action="store_true")
+    ap.add_argument("--cpu-devices", type=int, default=1, help="split jcrowd's speed runs")
     args = ap.parse_args()
+    use_cpu_devices(args.cpu_devices)  # before JAX starts its backend
     sections = set(args.sections.split(","))
     out: dict = {
         "safety": {},
         "machine": machine(),
         "jax": jax.__version__,
         "jupedsim": jps.__version__,
+        "cpu_devices": jax.device_count(),
     }
     if "bottleneck" in sections:
         bottleneck([float(w) for w in args.widths.split(",")], out)
@@ -688,7 +700,7 @@ def main() -> None:
         speed([int(n) for n in args.sizes.split(",")], out, pillars=False)
     details = (
         f"{out['machine']}, jax {out['jax']}, JuPedSim {out['jupedsim']}, dt 1/30 s, "
-        f"sections {args.sections}"
+        f"sections {args.sections}, cpu × {jax.device_count()}"
     )
     plot(out)
     report("pedestrians", details, out, _text(out), args.json, not args.no_record)

@@ -12,6 +12,7 @@ from jcrowd.crowd.avoidance import avoid as avoid
 from jcrowd.crowd.avoidance import avoid_in_grid as avoid_in_grid
 from jcrowd.crowd.avoidance import avoid_one as avoid_one
 from jcrowd.crowd.avoidance import closest_on_segments as closest_on_segments
+from jcrowd.crowd.blocking import OneStepAtATime as OneStepAtATime
 from jcrowd.crowd.clips import CrowdModel as CrowdModel
 from jcrowd.crowd.clips import build_crowd_model as build_crowd_model
 from jcrowd.crowd.clips import choose_controls as choose_controls
@@ -24,6 +25,7 @@ from jcrowd.crowd.dynamics import StepInfo as StepInfo
 from jcrowd.crowd.dynamics import World as World
 from jcrowd.crowd.dynamics import build_world as build_world
 from jcrowd.crowd.dynamics import pedestrian_step as pedestrian_step
+from jcrowd.crowd.dynamics import split_pedestrian_step as split_pedestrian_step
 from jcrowd.crowd.dynamics import wall_segments as wall_segments
 from jcrowd.crowd.dynamics import walls_near_cells as walls_near_cells
 from jcrowd.crowd.export import RECORD_KEYS as RECORD_KEYS
@@ -55,7 +57,6 @@ from jcrowd.crowd.scene import Scene as Scene
 from jcrowd.crowd.scene import build_scene as build_scene
 from jcrowd.crowd.scene import scene_bytes as scene_bytes
 from jcrowd.crowd.schedule import schedule as schedule
-from jcrowd.crowd.simulate import OneStepAtATime as OneStepAtATime
 from jcrowd.crowd.simulate import Simulation as Simulation
 from jcrowd.crowd.simulate import agent_mesh as agent_mesh
 from jcrowd.crowd.simulate import agent_order as agent_order

@@ -15,7 +15,8 @@ Walls are the boundary segments of the walkable area (holes included).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -24,6 +25,7 @@ import shapely
 from jaxtyping import Array, Bool, Float, Int
 
 from jcrowd.crowd.avoidance import AvoidanceParams, avoid_in_grid
+from jcrowd.crowd.blocking import OneStepAtATime
 from jcrowd.crowd.navigation import (
     Navigation,
     desired_directions,
@@ -32,7 +34,7 @@ from jcrowd.crowd.navigation import (
     field_values,
     rasterize,
 )
-from jcrowd.crowd.neighbours import GridSpec, cell_list, grid_spec
+from jcrowd.crowd.neighbours import GridSpec, cell_index, cell_list, grid_spec
 from jcrowd.errors import JcrowdError
 
 __all__ = [
@@ -41,6 +43,7 @@ __all__ = [
     "World",
     "build_world",
     "pedestrian_step",
+    "split_pedestrian_step",
     "wall_segments",
     "walls_near_cells",
 ]
@@ -97,12 +100,28 @@ class StepInfo(eqx.Module):
 
 
 def pedestrian_step(
-    params: AvoidanceParams, world: World, peds: Pedestrians, dt: Float[Array, ""] | float
+    params: AvoidanceParams,
+    world: World,
+    peds: Pedestrians,
+    dt: Float[Array, ""] | float,
+    gather: Callable[[Array], Array] | None = None,
+    ids: Array | None = None,
 ) -> tuple[Pedestrians, StepInfo]:
-    """Advance every alive agent by ``dt`` seconds (navigation → neighbours → avoidance)."""
+    """Advance every alive agent by ``dt`` seconds (navigation → neighbours → avoidance).
+
+    ``gather`` and ``ids``: on one device of several (:func:`split_pedestrian_step`), how the
+    block sees the whole crowd: ``gather`` maps the block's ``(n, c)`` rows to the crowd's
+    ``(N, c)``, ``ids`` are the block's rows in it.
+    """
     desired = desired_directions(world.nav, peds.target, peds.position)
-    cells = cell_list(world.grid, peds.position, peds.alive)
-    own_cell = jnp.minimum(cells.cell, world.grid.num_cells - 1)
+    mine = jnp.concatenate(
+        [peds.position, peds.radius[:, None], peds.alive[:, None].astype(peds.radius.dtype)],
+        axis=1,
+    )
+    every = mine if gather is None else gather(mine)
+    pos, rad, live = every[:, :2], every[:, 2], every[:, 3] > 0.5
+    rows = jnp.arange(peds.position.shape[0], dtype=jnp.int32) if ids is None else ids
+    cells = cell_list(world.grid, pos, live)
     velocity = avoid_in_grid(
         params,
         world.grid,
@@ -112,10 +131,10 @@ def pedestrian_step(
         peds.speed,
         peds.radius,
         peds.alive,
-        (peds.position, peds.radius),
-        jnp.arange(peds.position.shape[0], dtype=jnp.int32),
+        (pos, rad),
+        rows,
         world.walls,
-        world.cell_walls[own_cell],
+        world.cell_walls[cell_index(world.grid, peds.position)],
     )
     position = peds.position + velocity * dt
     depth = field_values(world.nav, peds.target, position[:, 0], position[:, 1])
@@ -124,6 +143,46 @@ def pedestrian_step(
     return eqx.tree_at(
         lambda p: (p.position, p.alive), peds, (position, peds.alive & ~arrived)
     ), info
+
+
+def split_pedestrian_step(devices: Sequence[Any] | None = None) -> Any:
+    """:func:`pedestrian_step` with the agents split over ``devices`` (default: all), in
+    contiguous blocks (the agent count must divide by their number).
+
+    ``(params, world, peds, dt) → (peds, info)`` as the plain step, compiled. Each device steps
+    its own block; neighbours live on every device, so each all-gathers the crowd's positions,
+    radii and alive flags (16 bytes per agent) and fills the whole grid. The call returns once
+    every device is done (:class:`~jcrowd.crowd.blocking.OneStepAtATime`).
+    """
+    import jax
+    from jax import shard_map
+    from jax.sharding import Mesh
+    from jax.sharding import PartitionSpec as P
+
+    devs = list(jax.devices() if devices is None else devices)
+    mesh = Mesh(np.array(devs), ("agents",))
+
+    def local(
+        params: AvoidanceParams, world: World, peds: Pedestrians, dt: Array
+    ) -> tuple[Pedestrians, StepInfo]:
+        n_local = peds.position.shape[0]
+        rows = jax.lax.axis_index("agents") * n_local + jnp.arange(n_local, dtype=jnp.int32)
+
+        def gather(block: Array) -> Array:
+            return jax.lax.all_gather(block, "agents", tiled=True)
+
+        return pedestrian_step(params, world, peds, dt, gather, rows)
+
+    agents, same = P("agents"), P()
+    mapped = shard_map(
+        local,
+        mesh=mesh,
+        in_specs=(same, same, agents, same),
+        # Every device fills the same grid: its overflow count is already the crowd's.
+        out_specs=(agents, StepInfo(agents, agents, same)),  # type: ignore[arg-type]
+        check_vma=False,
+    )
+    return OneStepAtATime(jax.jit(mapped))
 
 
 def wall_segments(walkable: shapely.Geometry) -> np.ndarray:
