@@ -140,8 +140,8 @@ class CrowdState(eqx.Module):
     vz: Float[Array, " N"]
     radius: Float[Array, " N"]  # m, the body disc the crowd dynamics keeps apart
     # The slot, not its agent (jcrowd.crowd.pool): time since the start (s, the same in every
-    # slot), the source agents queued for it (reservoir rows, −1 padding; width 0 without
-    # sources), how many of them it has taken, and the agent it holds (−1: none yet).
+    # slot), the source agents queued for it (reservoir rows, −1 padding; one −1 column
+    # without sources), how many of them it has taken, and the agent it holds (−1: none yet).
     clock: Float[Array, " N"]
     queue: Int[Array, "N Q"]
     next_row: Int[Array, " N"]
@@ -260,7 +260,9 @@ def init_state(
         vz=speed * jnp.cos(heading),
         radius=jnp.asarray(spawn.get("radius", np.full(n, DEFAULT_RADIUS)), jnp.float32),
         clock=jnp.zeros(n, jnp.float32),
-        queue=jnp.asarray(spawn.get("queue", np.zeros((n, 0))), jnp.int32),
+        # One empty column without sources: a zero-width array split over devices comes back
+        # from the compiled step with another sharding and would recompile it every call.
+        queue=jnp.asarray(spawn.get("queue", np.full((n, 1), -1)), jnp.int32),
         next_row=jnp.zeros(n, jnp.int32),
         agent=jnp.asarray(spawn.get("agent", np.arange(n)), jnp.int32),
     )
