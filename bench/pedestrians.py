@@ -5,6 +5,8 @@ with jcrowd's pedestrian step (:func:`jcrowd.crowd.pedestrian_step`, the collisi
 model) and with JuPedSim's ``CollisionFreeSpeedModel`` (defaults, the same model family). Both
 sides are measured with PedPy exactly as the experiments are (``../shared/data/pedestrians``).
 
+Needs the bench extra: ``pip install -e '.[dev,bench]'`` (JuPedSim and PedPy).
+
 Sections (``--sections``, default all):
 
 - ``bottleneck``: 150 agents in a 10 m × 10 m room leave through a 4 m corridor of width

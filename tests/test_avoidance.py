@@ -230,9 +230,10 @@ def test_grid_kernel_equals_avoid_with_every_slot(clump, spread):
     cl = cell_list(spec, p, jnp.asarray(alive))
     walls, wall_ids = jnp.zeros((0, 2, 2)), jnp.zeros((n, 1), jnp.int32)
     args = (jnp.asarray(desired), jnp.asarray(speed), jnp.asarray(radius))
-    want, _ = avoid(AvoidanceParams(), p, *args, candidates(spec, cl, p), walls, wall_ids)
+    # Compiled (one shape for all three cases): op by op, the branches cost ~10 s per case.
+    want, _ = jax.jit(avoid)(AvoidanceParams(), p, *args, candidates(spec, cl, p), walls, wall_ids)
     want = np.where(alive[:, None], np.asarray(want), 0.0)
-    got = avoid_in_grid(
+    got = jax.jit(avoid_in_grid, static_argnums=1)(
         AvoidanceParams(),
         spec,
         cl,
