@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import shapely
+from on_devices import run_on_devices
 
 from jcrowd.crowd import AvoidanceParams, Pedestrians, build_world, pedestrian_step, wall_segments
 from jcrowd.errors import JcrowdError
@@ -152,23 +153,7 @@ def test_split_over_two_devices_equals_one_device():
     """split_pedestrian_step on 2 devices (blocks of 20, neighbours through the all-gather)
     equals it on 1 device: same agents out at the same steps, positions to 1e-4 m after 200
     steps of a jammed bottleneck (float32 sums in another order, grown over the steps)."""
-    import json
-    import os
-    import subprocess
-    import sys
-
-    out = {}
-    for k in (1, 2):
-        env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={k}")
-        proc = subprocess.run(
-            [sys.executable, "-c", SPLIT_SCRIPT],
-            capture_output=True,
-            text=True,
-            env=env,
-            timeout=600,
-        )
-        assert proc.returncode == 0, f"{k} device(s): exit {proc.returncode}\n{proc.stderr[-4000:]}"
-        out[k] = json.loads(proc.stdout.strip().splitlines()[-1])
+    out = {k: run_on_devices(SPLIT_SCRIPT, k) for k in (1, 2)}
     assert out[1]["devices"] == 1 and out[2]["devices"] == 2
     assert out[2]["left"] == out[1]["left"] and sum(out[1]["left"]) > 0
     assert out[2]["alive"] == out[1]["alive"]

@@ -9,10 +9,6 @@ where its source is, and the step compiles once.
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 import textwrap
 
 import jax
@@ -21,6 +17,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from on_devices import run_on_devices
 
 from jcrowd import load_default_model
 from jcrowd.crowd import prepare
@@ -259,19 +256,7 @@ def test_split_over_two_devices_equals_one_device():
     """Each device fills its own block's slots: same slots, agents and positions (to 1e-4 m
     after 80 avoiding steps, as tests/test_steering.py) as on one device."""
     text = SCENE.format(duration=8, avoid="true", count=4)
-    out = {}
-    for k in (1, 2):
-        env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={k}")
-        proc = subprocess.run(
-            [sys.executable, "-c", SCRIPT],
-            input=text,
-            capture_output=True,
-            text=True,
-            env=env,
-            timeout=600,
-        )
-        assert proc.returncode == 0, f"{k} device(s): exit {proc.returncode}\n{proc.stderr[-4000:]}"
-        out[k] = json.loads(proc.stdout.strip().splitlines()[-1])
+    out = {k: run_on_devices(SCRIPT, k, text) for k in (1, 2)}
     assert out[2]["agent"] == out[1]["agent"] and out[2]["alive"] == out[1]["alive"]
     np.testing.assert_allclose(out[2]["x"], out[1]["x"], atol=1e-4)
     np.testing.assert_allclose(out[2]["z"], out[1]["z"], atol=1e-4)

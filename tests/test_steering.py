@@ -8,16 +8,13 @@ devices equals one device (subprocesses, as tests/test_per_device.py).
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 import textwrap
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from on_devices import run_on_devices
 
 from jcrowd import load_default_model
 from jcrowd.crowd import aim_point, prepare, turn_towards
@@ -142,19 +139,7 @@ def test_split_over_two_devices_equals_one_device():
     avoidance let a 1e-6 difference grow). A pillar between the groups puts the scene's
     navigation fields and walls (jcrowd.crowd.scene) under the split too."""
     text = COUNTERFLOW.format(avoid="true") + PILLAR
-    out = {}
-    for k in (1, 2):
-        env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={k}")
-        proc = subprocess.run(
-            [sys.executable, "-c", SCRIPT],
-            input=text,
-            capture_output=True,
-            text=True,
-            env=env,
-            timeout=600,
-        )
-        assert proc.returncode == 0, f"{k} device(s): exit {proc.returncode}\n{proc.stderr[-4000:]}"
-        out[k] = json.loads(proc.stdout.strip().splitlines()[-1])
+    out = {k: run_on_devices(SCRIPT, k, text) for k in (1, 2)}
     np.testing.assert_allclose(out[2]["x"], out[1]["x"], atol=1e-4)
     np.testing.assert_allclose(out[2]["z"], out[1]["z"], atol=1e-4)
     assert jax.device_count() >= 1
