@@ -14,9 +14,13 @@ import sys
 from typing import Any
 
 
-def run_on_devices(script: str, devices: int, stdin: str | None = None) -> dict[str, Any]:
-    """``python -c script`` with ``devices`` CPU devices; its last stdout line as JSON."""
+def run_on_devices(
+    script: str, devices: int, stdin: str | None = None, **env_vars: str
+) -> dict[str, Any]:
+    """``python -c script`` with ``devices`` CPU devices (and ``env_vars`` set); its last
+    stdout line as JSON."""
     env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}")
+    env.update(env_vars)
     proc = subprocess.run(
         [sys.executable, "-c", script],
         input=stdin,

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from on_devices import run_on_devices
 
 from jcrowd import load_default_model
 from jcrowd.crowd import decode_coeffs, level_points, pose_from_coeffs, prepare, step
@@ -252,19 +253,7 @@ SHARDED = textwrap.dedent(
 
 
 def _run_sharded(devices):
-    env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}")
-    env["JAX_PLATFORMS"] = "cpu"
-    text = SCENE.format(count=32)
-    out = subprocess.run(
-        [sys.executable, "-c", SHARDED],
-        input=text,
-        env=env,
-        capture_output=True,
-        text=True,
-        check=True,
-        timeout=300,
-    )
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    return run_on_devices(SHARDED, devices, SCENE.format(count=32), JAX_PLATFORMS="cpu")
 
 
 @pytest.mark.slow

@@ -10,6 +10,9 @@ waypoint, or with the crowd dynamics on, along its simulated velocity
 
 from __future__ import annotations
 
+from dataclasses import replace
+from typing import Any
+
 import jax.numpy as jnp
 from jaxtyping import Array, Bool
 
@@ -90,39 +93,19 @@ def schedule(
 
     wrap = state.tau >= last
     take = wrap & has_next
-    return (
-        CrowdState(
-            x=state.x,
-            z=state.z,
-            heading=state.heading,
-            tau=jnp.where(wrap, state.tau - last, state.tau),
-            control=control,
-            mix=mix,
-            duration=duration,
-            current=jnp.where(take, 1 - state.current, state.current),
-            has_next=has_next & ~take,
-            origin_x=jnp.where(wrap, state.x, state.origin_x),
-            origin_z=jnp.where(wrap, state.z, state.origin_z),
-            origin_heading=jnp.where(wrap, state.heading, state.origin_heading),
-            level=state.level,
-            far_core=state.far_core,
-            far_valid=state.far_valid & ~take,
-            alive=alive,
-            height=state.height,
-            speed=state.speed,
-            waypoints=state.waypoints,
-            num_waypoints=state.num_waypoints,
-            loop=state.loop,
-            waypoint=wp,
-            field=state.field,
-            vx=state.vx,
-            vz=state.vz,
-            radius=state.radius,
-            clock=state.clock,
-            queue=state.queue,
-            next_row=state.next_row,
-            agent=state.agent,
-            interleave=state.interleave,
-        ),
-        deferred,
-    )
+    # Only what scheduling changes; every other field (the slot's, the dynamics') passes through.
+    changed: dict[str, Any] = {
+        "tau": jnp.where(wrap, state.tau - last, state.tau),
+        "control": control,
+        "mix": mix,
+        "duration": duration,
+        "current": jnp.where(take, 1 - state.current, state.current),
+        "has_next": has_next & ~take,
+        "origin_x": jnp.where(wrap, state.x, state.origin_x),
+        "origin_z": jnp.where(wrap, state.z, state.origin_z),
+        "origin_heading": jnp.where(wrap, state.heading, state.origin_heading),
+        "far_valid": state.far_valid & ~take,
+        "alive": alive,
+        "waypoint": wp,
+    }
+    return replace(state, **changed), deferred
