@@ -203,17 +203,18 @@ def test_a_block_of_the_crowd_against_the_whole_equals_the_whole():
 
 @pytest.mark.parametrize(
     ("clump", "spread"),
-    [(0, 200), (40, 160), (200, 0)],
-    ids=["all-sparse", "some-dense", "all-dense"],
+    [(0, 200), (14, 186), (40, 160), (200, 0)],
+    ids=["all-sparse", "middle-tier", "some-dense", "all-dense"],
 )
 def test_grid_kernel_equals_avoid_with_every_slot(clump, spread):
-    """avoid_in_grid reads the occupied slots (sparse agents) and every slot (dense ones, in a
-    bucket, or everyone when the bucket overflows): the same velocities as avoid over every
-    slot of the 3 × 3 cells, in all three branches. Tolerance 2e-6 m/s: the same float32
-    terms summed in another order. A clump of ``clump`` agents in 2 × 2 m makes them dense
-    (≥ SPARSE_SLOTS = 24 neighbours), ``spread`` agents over 60 × 60 m are sparse; with 200 in
-    the clump more are dense than the bucket's max(64, N/8) slots."""
-    from jcrowd.crowd import SPARSE_SLOTS, avoid_in_grid
+    """avoid_in_grid reads each agent's first 8 candidates, then 32 for agents with 8 or more,
+    then nine full cells for those with 32 or more (in a bucket, or everyone when the largest
+    bucket is too small): the same velocities as avoid over every candidate of the 3 × 3
+    cells, in every branch. Tolerance 2e-6 m/s: the same float32 terms summed in another
+    order. A clump of ``clump`` agents in 2 × 2 m gives them ``clump − 1`` or more candidates
+    (14: the middle tier only; 40: both tiers), ``spread`` agents over 60 × 60 m have few;
+    with 200 in the clump more move on than the largest bucket, max(64, N/8), holds."""
+    from jcrowd.crowd import CANDIDATE_TIERS, avoid_in_grid, compact_candidates
 
     rng = np.random.default_rng(clump + spread)
     pos = np.concatenate(
@@ -246,6 +247,11 @@ def test_grid_kernel_equals_avoid_with_every_slot(clump, spread):
         wall_ids,
     )
     np.testing.assert_allclose(np.asarray(got), want, atol=2e-6)
-    dense = int(np.sum(alive[:clump])) if clump else 0
-    assert (dense > max(64, n // 8)) == (clump == 200)  # the premise of the third case
-    assert SPARSE_SLOTS == 24
+    # The premises: which tiers each case reaches.
+    assert CANDIDATE_TIERS == (8, 32)
+    _, count = compact_candidates(spec, cl, p, 8)
+    count = np.where(alive, np.asarray(count), 0)
+    reach = (int(np.sum(count >= 8)), int(np.sum(count >= 32)))
+    want_reach = {0: (0, 0), 14: (">0", 0), 40: (">0", ">0"), 200: (">64", ">64")}[clump]
+    for got_n, rule in zip(reach, want_reach, strict=True):
+        assert got_n == 0 if rule == 0 else got_n > int(rule[1:]), (reach, want_reach)

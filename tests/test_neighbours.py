@@ -38,15 +38,19 @@ def test_cells_and_overflow_equal_a_loop_over_agents(n, cell, seed):
     pos, alive = _crowd(n, seed)
     spec = grid_spec((-5.0, -3.0), (5.0, 3.0), cell, max_density=1.0, headroom=1.0)
     cl = cell_list(spec, jnp.asarray(pos), jnp.asarray(alive))
-    slots = np.asarray(cl.slots)
+    order, start, place = np.asarray(cl.order), np.asarray(cl.start), np.asarray(cl.place)
     brute = _brute_cells(spec, pos, alive)
-    overflow = 0
+    overflow, stored = 0, 0
     for c in range(spec.num_cells):
         want = brute.get(c, [])
         kept = want[: spec.capacity]
         overflow += len(want) - len(kept)
-        assert list(slots[c][: len(kept)]) == kept, c
-        assert (slots[c][len(kept) :] == n).all(), c
+        assert list(order[start[c] : start[c + 1]]) == kept, c
+        assert all(place[i] == start[c] + r for r, i in enumerate(kept)), c
+        assert all(place[i] == n for i in want[spec.capacity :]), c
+        stored += len(kept)
+    assert start[-1] == stored and (order[stored:] == n).all()
+    assert (place[~alive] == n).all()
     assert int(cl.overflow) == overflow
     assert overflow > 0  # premise: capacities chosen so some cells overflow
 
@@ -94,10 +98,12 @@ def test_every_alive_agent_is_stored_or_counted(n, cell, seed):
     pos, alive = _crowd(n, seed, dead=0.3)
     spec = grid_spec((-5.0, -3.0), (5.0, 3.0), cell, max_density=2.0, headroom=1.0)
     cl = cell_list(spec, jnp.asarray(pos), jnp.asarray(alive))
-    stored = np.asarray(cl.slots)
+    stored = np.asarray(cl.order)
     stored = stored[stored < n]
     assert len(set(stored.tolist())) == len(stored)
     assert len(stored) + int(cl.overflow) == int(alive.sum())
+    place = np.asarray(cl.place)
+    assert (np.asarray(cl.order)[place[place < n]] == np.nonzero(place < n)[0]).all()
 
 
 def test_jit_equals_eager():
@@ -106,7 +112,7 @@ def test_jit_equals_eager():
 
     def both(p, a):
         cl = cell_list(spec, p, a)
-        return cl.slots, cl.overflow, candidates(spec, cl, p)
+        return cl.order, cl.start, cl.place, cl.overflow, candidates(spec, cl, p)
 
     eager = both(jnp.asarray(pos), jnp.asarray(alive))
     jitted = jax.jit(both)(jnp.asarray(pos), jnp.asarray(alive))
@@ -124,23 +130,32 @@ def test_grid_spec_errors_and_capacity():
 
 
 @pytest.mark.parametrize(("n", "k"), [(60, 8), (300, 24), (300, 200)])
-def test_compact_candidates_are_the_occupied_slots_in_order(n, k):
-    """Oracle: the full candidate list (asked with no agent excluded) without its empty slots:
-    its first k entries, the agent itself then blanked, are the compacted ids, and its length
-    less the agent itself is the count."""
+def test_compact_candidates_are_the_3x3_cells_in_order(n, k):
+    """Oracle: a loop over the 3 × 3 cells (column ix − 1, ix, ix + 1; within a column z
+    increasing; within a cell ids increasing, from the brute-force cell lists): the first k
+    of that list, the agent itself then blanked, are the compacted ids, and its length less
+    the agent itself is the count."""
     from jcrowd.crowd import compact_candidates
 
     pos, alive = _crowd(n, 4)
     spec = grid_spec((-5.0, -3.0), (5.0, 3.0), 1.0)
     cl = cell_list(spec, jnp.asarray(pos), jnp.asarray(alive))
-    nobody = jnp.full(n, -1, jnp.int32)  # exclude no one: the raw slots, self included
-    raw = np.asarray(candidates(spec, cl, jnp.asarray(pos), nobody))
+    brute = _brute_cells(spec, pos, alive)
     got, count = compact_candidates(spec, cl, jnp.asarray(pos), k)
     got, count = np.asarray(got), np.asarray(count)
+    nx, nz = spec.shape
     for i in range(n):
-        occupied = [int(j) for j in raw[i] if j < n]
-        assert count[i] == len([j for j in occupied if j != i]), i
-        assert [int(j) for j in got[i] if j < n] == [j for j in occupied[:k] if j != i], i
+        ix = min(max(int(np.floor((pos[i, 0] + 5.0) / spec.cell)), 0), nx - 1)
+        iz = min(max(int(np.floor((pos[i, 1] + 3.0) / spec.cell)), 0), nz - 1)
+        block = [
+            j
+            for jx in (ix - 1, ix, ix + 1)
+            for jz in (iz - 1, iz, iz + 1)
+            if 0 <= jx < nx and 0 <= jz < nz
+            for j in brute.get(jx * nz + jz, [])
+        ]
+        assert count[i] == len([j for j in block if j != i]), i
+        assert [int(j) for j in got[i] if j < n] == [j for j in block[:k] if j != i], i
     assert (count > k).any() or k == 200  # premise: some agents have more than k
     assert count.max() <= k or k < 200
 

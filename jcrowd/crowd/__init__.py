@@ -6,7 +6,7 @@ a recorded agent back into a clip. It never touches files, rendering or the CLI 
 contract checked in CI).
 """
 
-from jcrowd.crowd.avoidance import SPARSE_SLOTS as SPARSE_SLOTS
+from jcrowd.crowd.avoidance import CANDIDATE_TIERS as CANDIDATE_TIERS
 from jcrowd.crowd.avoidance import AvoidanceParams as AvoidanceParams
 from jcrowd.crowd.avoidance import avoid as avoid
 from jcrowd.crowd.avoidance import avoid_in_grid as avoid_in_grid
@@ -51,6 +51,7 @@ from jcrowd.crowd.neighbours import cell_index as cell_index
 from jcrowd.crowd.neighbours import cell_list as cell_list
 from jcrowd.crowd.neighbours import compact_candidates as compact_candidates
 from jcrowd.crowd.neighbours import grid_spec as grid_spec
+from jcrowd.crowd.neighbours import near_places as near_places
 from jcrowd.crowd.scene import MAX_FIELD_BYTES as MAX_FIELD_BYTES
 from jcrowd.crowd.scene import NAV_CELL_M as NAV_CELL_M
 from jcrowd.crowd.scene import Scene as Scene

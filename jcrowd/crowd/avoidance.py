@@ -30,15 +30,18 @@ ids (:func:`jcrowd.crowd.neighbours.candidates`, ``N`` for none) and walls as se
 
 from __future__ import annotations
 
+from functools import partial
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.neighbours import CellList, GridSpec, candidates, compact_candidates
+from jcrowd.crowd.neighbours import CellList, GridSpec, near_places
 
 __all__ = [
-    "SPARSE_SLOTS",
+    "BUCKET_DIVISORS",
+    "CANDIDATE_TIERS",
     "AvoidanceParams",
     "avoid",
     "avoid_in_grid",
@@ -46,9 +49,14 @@ __all__ = [
     "closest_on_segments",
 ]
 
-SPARSE_SLOTS = 24
-"""Neighbour columns read for an agent whose 3 × 3 cells hold fewer agents than this; denser
-agents read every slot (see :func:`avoid_in_grid`)."""
+CANDIDATE_TIERS = (8, 32)
+"""Candidates read per agent, tier by tier (:func:`avoid_in_grid`): an agent whose 3 × 3 cells
+hold fewer others than a tier's count has them all there; a denser one moves on to the next
+tier, and past the last to nine full cells."""
+
+BUCKET_DIVISORS = (64, 8)
+"""The agents moving on to a tier are evaluated in the smallest bucket of ``N / d`` agents
+(at least 64) that holds them all, else all ``N`` agents are (one branch runs)."""
 
 _TINY = 1e-6  # m: distances below this count as coincident (direction left undefined → 0)
 
@@ -204,18 +212,25 @@ def avoid_in_grid(
     walls: Float[Array, "S 2 2"],
     wall_ids: Int[Array, "n W"],
 ) -> Float[Array, "n 2"]:
-    """:func:`avoid` for agents whose neighbours are the crowd in ``cells``, reading only the
-    slots that hold someone. Agents not alive get velocity 0.
+    """:func:`avoid` for agents whose neighbours are the crowd in ``cells``, reading only as
+    many candidates as each agent has. Agents not alive get velocity 0.
 
     ``others = (positions (P, 2), radii (P,))`` is the crowd ``cells`` was filled from and
-    ``rows`` the agents' own ids in it (their own slot is skipped). Most agents have few
-    neighbours: their occupied slots fit :data:`SPARSE_SLOTS` columns
-    (:func:`~jcrowd.crowd.neighbours.compact_candidates`). The others (count ≥ ``SPARSE_SLOTS``)
-    are compacted into a bucket read with every slot of their 3 × 3 cells; when more than the
-    bucket holds are dense, everyone is (one branch runs). Same velocities as :func:`avoid`
-    with :func:`~jcrowd.crowd.neighbours.candidates`, but for the order of the sums.
+    ``rows`` the agents' own ids in it (they are not their own neighbours). The crowd is read
+    in cell order (:class:`~jcrowd.crowd.neighbours.CellList`), so a candidate is one read.
+    Everyone is first evaluated with the first :data:`CANDIDATE_TIERS` ``[0]`` candidates; an
+    agent with that many or more is evaluated again with the next tier's count (the last tier
+    holds nine full cells), in the smallest bucket of :data:`BUCKET_DIVISORS` that holds all
+    such agents, or all agents at that tier when none does (one branch runs). Same
+    velocities as :func:`avoid` with :func:`~jcrowd.crowd.neighbours.candidates`, but for the
+    order of the sums.
     """
     n = position.shape[0]
+    pos, rad = others
+    order = cells.order
+    pos_c = jnp.concatenate([pos, jnp.zeros((1, 2), pos.dtype)])[order]  # cell order
+    rad_c = jnp.concatenate([rad, jnp.zeros((1,), rad.dtype)])[order]
+    own = cells.place[rows]
 
     def velocities(sel: Array, near: Array) -> Array:
         v, _ = avoid(
@@ -227,29 +242,33 @@ def avoid_in_grid(
             near,
             walls,
             wall_ids[sel],
-            others=others,
+            others=(pos_c, rad_c),
         )
         return v
 
+    tiers = [k for k in CANDIDATE_TIERS if k < 9 * grid.capacity] + [9 * grid.capacity]
+    buckets = sorted({min(n, max(64, n // d)) for d in BUCKET_DIVISORS})
     everyone = jnp.arange(n, dtype=jnp.int32)
-    near, count = compact_candidates(grid, cells, position, SPARSE_SLOTS, rows)
-    sparse = velocities(everyone, near)
-    dense = alive & (count >= SPARSE_SLOTS)
-    n_dense = jnp.sum(dense, dtype=jnp.int32)
-    bucket = min(n, max(64, n // 8))
+    near, count = near_places(grid, cells, position, tiers[0], own)
+    velocity = velocities(everyone, near)
+    for below, k in zip(tiers, tiers[1:], strict=False):
+        dense = alive & (count >= below)
+        n_dense = jnp.sum(dense, dtype=jnp.int32)
 
-    def some_dense() -> Array:
-        (idx,) = jnp.nonzero(dense, size=bucket, fill_value=n)
-        safe = jnp.where(idx < n, idx, 0)
-        full = candidates(grid, cells, position[safe], rows[safe])
-        return sparse.at[idx].set(velocities(safe, full), mode="drop")
+        def keep(velocity: Array) -> Array:
+            return velocity
 
-    def all_dense() -> Array:
-        return velocities(everyone, candidates(grid, cells, position, rows))
+        def in_bucket(velocity: Array, dense: Array = dense, k: int = k, *, b: int) -> Array:
+            (idx,) = jnp.nonzero(dense, size=b, fill_value=n)
+            safe = jnp.where(idx < n, idx, 0)
+            full, _ = near_places(grid, cells, position[safe], k, own[safe])
+            return velocity.at[idx].set(velocities(safe, full), mode="drop")
 
-    velocity = jax.lax.cond(
-        n_dense == 0,
-        lambda: sparse,
-        lambda: jax.lax.cond(n_dense <= bucket, some_dense, all_dense),
-    )
+        def all_agents(velocity: Array, k: int = k) -> Array:
+            full, _ = near_places(grid, cells, position, k, own)
+            return velocities(everyone, full)
+
+        branches = [keep, *(partial(in_bucket, b=b) for b in buckets), all_agents]
+        which = jnp.where(n_dense == 0, 0, 1 + sum((n_dense > b).astype(jnp.int32) for b in buckets))
+        velocity = jax.lax.switch(which, branches, velocity)
     return jnp.where(alive[:, None], velocity, 0.0)
