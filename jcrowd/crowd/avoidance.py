@@ -30,6 +30,7 @@ ids (:func:`jcrowd.crowd.neighbours.candidates`, ``N`` for none) and walls as se
 
 from __future__ import annotations
 
+import itertools
 from functools import partial
 
 import equinox as eqx
@@ -251,7 +252,7 @@ def avoid_in_grid(
     everyone = jnp.arange(n, dtype=jnp.int32)
     near, count = near_places(grid, cells, position, tiers[0], own)
     velocity = velocities(everyone, near)
-    for below, k in zip(tiers, tiers[1:], strict=False):
+    for below, k in itertools.pairwise(tiers):
         dense = alive & (count >= below)
         n_dense = jnp.sum(dense, dtype=jnp.int32)
 
@@ -269,6 +270,7 @@ def avoid_in_grid(
             return velocities(everyone, full)
 
         branches = [keep, *(partial(in_bucket, b=b) for b in buckets), all_agents]
-        which = jnp.where(n_dense == 0, 0, 1 + sum((n_dense > b).astype(jnp.int32) for b in buckets))
+        larger = sum((n_dense > b).astype(jnp.int32) for b in buckets)
+        which = jnp.where(n_dense == 0, 0, 1 + larger)
         velocity = jax.lax.switch(which, branches, velocity)
     return jnp.where(alive[:, None], velocity, 0.0)

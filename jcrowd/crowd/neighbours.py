@@ -202,11 +202,10 @@ def near_places(
     e1 = e0 + hi[1] - lo[1]
     total = e1 + hi[2] - lo[2]
     t = jnp.arange(k, dtype=jnp.int32)[None, :]
-    p = jnp.where(
-        t < e0[:, None],
-        lo[0][:, None] + t,
-        jnp.where(t < e1[:, None], lo[1][:, None] + t - e0[:, None], lo[2][:, None] + t - e1[:, None]),
+    second = jnp.where(
+        t < e1[:, None], lo[1][:, None] + t - e0[:, None], lo[2][:, None] + t - e1[:, None]
     )
+    p = jnp.where(t < e0[:, None], lo[0][:, None] + t, second)
     p = jnp.where((t < total[:, None]) & (p != own[:, None]), p, n)
     return p, total - (own < n).astype(jnp.int32)
 
