@@ -217,11 +217,12 @@ def run_count(
     bw: float,
     min_pixels: float | None = None,
     avoid: bool = False,
+    far_every: int = 1,
 ) -> dict[str, Any]:
     side = float(np.sqrt(10.0 * n))
     text = PLAZA.format(side=side + 2, inner=side, eye_z=-side / 2 - 0.5, n=n)
     if avoid:
-        text += "\n[dynamics]\navoid = true\n"
+        text += f"\n[dynamics]\navoid = true\nfar_every = {far_every}\n"
     sim, state = prepare(parse_scenario(text, "bench-plaza.toml"), model)
     state = shard_state(state)  # one block of agents per device (unchanged on one device)
     if min_pixels is not None:  # every agent in view synthesized: no dots at all
@@ -270,6 +271,9 @@ def main() -> None:
     ap.add_argument("--no-record", action="store_true")
     ap.add_argument("--cpu-devices", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--avoid", action="store_true", help="crowd dynamics on ([dynamics] avoid)")
+    ap.add_argument(
+        "--far-every", type=int, default=1, help="with --avoid: [dynamics] far_every (sim LOD)"
+    )
     args = ap.parse_args()
     use_cpu_devices(args.cpu_devices)  # before JAX starts its backend
     counts = [int(v) for v in args.agents.split(",")]
@@ -279,7 +283,7 @@ def main() -> None:
     full_rate = 0.0
     for n in counts:
         steps = args.steps if n < 1_000_000 else max(3, args.steps // 4)
-        row = run_count(model, n, steps, bw, avoid=args.avoid)
+        row = run_count(model, n, steps, bw, avoid=args.avoid, far_every=args.far_every)
         sim, state = row.pop("_sim")
         naive[str(n)] = naive_ms(model, n, 3)
         speedup[str(n)] = naive[str(n)] / row["ms_per_step"]
@@ -288,7 +292,9 @@ def main() -> None:
         rows.append(row)
         print(f"{n:,} agents: {row['ms_per_step']:.1f} ms/step", file=sys.stderr)
         if n == 100_000:  # the same plaza with every agent in view synthesized
-            every = run_count(model, n, steps, bw, min_pixels=0.0, avoid=args.avoid)
+            every = run_count(
+                model, n, steps, bw, min_pixels=0.0, avoid=args.avoid, far_every=args.far_every
+            )
             every.pop("_sim")
             rows.append(every)
     out = {
@@ -302,6 +308,7 @@ def main() -> None:
         "device": str(jax.devices()[0].platform),
         "devices": len(jax.devices()),
         "avoid": args.avoid,
+        "far_every": args.far_every,
         "machine": machine(),
         "jax": jax.__version__,
     }
@@ -309,7 +316,8 @@ def main() -> None:
     report(
         "step",
         f"{out['machine']}, jax {out['jax']}, {out['device']} × {out['devices']}"
-        + (", avoidance on" if args.avoid else ""),
+        + (", avoidance on" if args.avoid else "")
+        + (f", far agents every {args.far_every} steps" if args.avoid and args.far_every > 1 else ""),
         out,
         text,
         args.json,

@@ -396,6 +396,7 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         min_pixels=lod.min_pixels,
         avoid=scenario.dynamics.avoid,
         grid=_neighbour_grid(scenario) if scenario.dynamics.avoid else None,
+        far_every=scenario.dynamics.far_every,
     )
     config.check(levels)
     scene = None

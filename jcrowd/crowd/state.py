@@ -57,6 +57,9 @@ class StepConfig:
             avoid each other, the root is the simulated position, clips follow the velocity
             and foot locking is off (it would move the root off the simulated position).
         grid: the dynamics' neighbour grid (required with ``avoid``).
+        far_every: simulation level of detail: agents drawn coarser than ``blend_max_level``
+            (or not drawn) compute their avoidance every ``far_every`` steps, in turn, and
+            walk on at their last velocity in between (1: everyone every step).
     """
 
     capacities: tuple[int, ...]
@@ -73,6 +76,7 @@ class StepConfig:
     krige_budget: int = 0
     avoid: bool = False
     grid: GridSpec | None = None
+    far_every: int = 1
 
     def check(self, levels: int) -> None:
         """Raise :class:`JcrowdError` unless the settings fit a model with ``levels`` levels."""
@@ -94,6 +98,10 @@ class StepConfig:
                     f"lod.{name}: expected a non-negative integer (0: default), "
                     f"found {getattr(self, name)}"
                 )
+        if self.far_every < 1:
+            raise JcrowdError(
+                f"dynamics.far_every: expected a positive integer, found {self.far_every}"
+            )
         if self.avoid and self.grid is None:
             raise JcrowdError("dynamics: expected a neighbour grid with avoid on, found none")
         if self.importance not in ("distance", "pixels"):

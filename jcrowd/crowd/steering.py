@@ -21,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import jax.numpy as jnp
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Bool, Float, Int
 
 from jcrowd.crowd.avoidance import AvoidanceParams, avoid_in_grid
 from jcrowd.crowd.navigation import desired_directions, field_values
@@ -34,6 +34,7 @@ __all__ = [
     "TURN_RATE",
     "aim_point",
     "current_field",
+    "due_rows",
     "steer",
     "turn_towards",
     "waypoint_xz",
@@ -78,6 +79,8 @@ def steer(
     ids: Array | None = None,
     scene: Scene | None = None,
     field: Array | None = None,
+    due: Array | None = None,
+    previous: tuple[Array, Array] | None = None,
 ) -> tuple[Array, Array, Array]:
     """Velocity ``(vx, vz)`` (m/s) of each agent walking to ``(tx, tz)``, and the grid overflow.
 
@@ -86,7 +89,24 @@ def steer(
     to the whole crowd's ``(N, c)`` and ``ids`` are the block's rows in it. With a ``scene``
     and each agent's ``field`` the desired direction runs down that field until the agent is
     inside its target (then straight at ``(tx, tz)``), and the scene's walls repel.
+
+    ``due`` (simulation level of detail): the rows whose velocity is computed this step, a
+    fixed-size index array (``n`` pads it); the others keep their ``previous`` velocity
+    ``(vx, vz)``. Every agent is still everyone's neighbour at its current position.
     """
+    n = x.shape[0]
+    mine = jnp.stack([x, z, radius, alive.astype(x.dtype)], axis=1)
+    every = mine if gather is None else gather(mine)
+    pos, rad, live = every[:, :2], every[:, 2], every[:, 3] > 0.5
+    rows = jnp.arange(n, dtype=jnp.int32) if ids is None else ids
+    cells = cell_list(grid, pos, live)
+    if due is not None:
+        sel = jnp.where(due < n, due, 0)
+        in_sel = alive[sel] & (due < n)
+        x, z, tx, tz, speed, radius, rows = (a[sel] for a in (x, z, tx, tz, speed, radius, rows))
+        field = None if field is None else field[sel]
+    else:
+        in_sel = alive
     dx, dz = tx - x, tz - z
     norm = jnp.sqrt(dx * dx + dz * dz)
     desired = jnp.stack([dx, dz], axis=1) / jnp.maximum(norm, 1e-6)[:, None]
@@ -96,11 +116,6 @@ def steer(
         inside = field_values(scene.nav, field, x, z) <= 0.0
         down = desired_directions(scene.nav, field, here_xz)
         desired = jnp.where(inside[:, None], desired, down)
-    mine = jnp.stack([x, z, radius, alive.astype(x.dtype)], axis=1)
-    every = mine if gather is None else gather(mine)
-    pos, rad, live = every[:, :2], every[:, 2], every[:, 3] > 0.5
-    rows = jnp.arange(x.shape[0], dtype=jnp.int32) if ids is None else ids
-    cells = cell_list(grid, pos, live)
     here = jnp.stack([x, z], axis=1)
     if scene is None:
         walls, wall_ids = jnp.zeros((0, 2, 2), x.dtype), jnp.zeros((x.shape[0], 1), jnp.int32)
@@ -114,13 +129,33 @@ def steer(
         desired,
         speed,
         radius,
-        alive,
+        in_sel,
         (pos, rad),
         rows,
         walls,
         wall_ids,
     )
-    return velocity[:, 0], velocity[:, 1], cells.overflow
+    vx, vz = velocity[:, 0], velocity[:, 1]
+    if due is not None:
+        px, pz = (jnp.zeros(n, x.dtype), jnp.zeros(n, x.dtype)) if previous is None else previous
+        vx = jnp.where(alive, px.at[due].set(vx, mode="drop"), 0.0)
+        vz = jnp.where(alive, pz.at[due].set(vz, mode="drop"), 0.0)
+    return vx, vz, cells.overflow
+
+
+def due_rows(
+    near: Bool[Array, " N"], clock: Float[Array, " N"], dt: Array, every: int, size: int
+) -> Int[Array, " size"]:
+    """The rows whose avoidance runs this step when far agents update every ``every`` steps:
+    every ``near`` agent, and the others in turn — row ``i`` when ``(tick + i) mod every = 0``
+    with ``tick = round(clock / dt)`` (each step a different ``1 / every`` of them). Returns
+    ``size`` row ids, padded with ``N``; ``size`` must hold the near agents plus
+    ``⌈N / every⌉``."""
+    n = near.shape[0]
+    tick = jnp.round(clock / dt).astype(jnp.int32)
+    turn = jnp.remainder(tick + jnp.arange(n, dtype=jnp.int32), every) == 0
+    (rows,) = jnp.nonzero(near | turn, size=size, fill_value=n)
+    return rows.astype(jnp.int32)
 
 
 def turn_towards(heading: Array, vx: Array, vz: Array, dt: Array, min_speed: float = 0.05) -> Array:

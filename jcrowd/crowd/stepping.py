@@ -60,7 +60,7 @@ from jcrowd.crowd.pool import Pool, spawn_due
 from jcrowd.crowd.scene import Scene
 from jcrowd.crowd.schedule import schedule
 from jcrowd.crowd.state import CrowdState, Frame, StepConfig, refresh_far_cores
-from jcrowd.crowd.steering import current_field, steer, turn_towards, waypoint_xz
+from jcrowd.crowd.steering import current_field, due_rows, steer, turn_towards, waypoint_xz
 from jcrowd.crowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
 from jcrowd.motion.fastmath import sincos
 
@@ -285,6 +285,13 @@ def step(
     if config.avoid:
         grid = cast(GridSpec, config.grid)  # StepConfig.check requires it with avoid
         tx, tz = waypoint_xz(state.waypoints, state.waypoint)
+        due = None
+        if config.far_every > 1:  # simulation LOD: far agents in turn
+            n = state.x.shape[0]
+            near_slots = sum(config.capacities[: config.blend_max_level + 1])
+            size = min(n, -(-n // config.far_every) + near_slots)
+            near = buckets.level <= config.blend_max_level
+            due = due_rows(near, state.clock, dt, config.far_every, size)
         vx, vz, crowding = steer(
             grid,
             state.x,
@@ -298,6 +305,8 @@ def step(
             ids,
             scene,
             None if scene is None else current_field(state),
+            due,
+            (state.vx, state.vz),
         )
         dx, dz = vx * dt, vz * dt
         heading = turn_towards(state.heading, vx, vz, dt)
@@ -315,7 +324,7 @@ def step(
     state = eqx.tree_at(lambda s: (s.x, s.z, s.heading, s.tau, s.vx, s.vz), state, moved)
     state, deferred = schedule(cm, config, state, buckets.level < nlev, scene)
     state = eqx.tree_at(lambda s: s.level, state, buckets.level)
-    if pool is not None:
+    if pool is not None or config.far_every > 1:
         state = eqx.tree_at(lambda s: s.clock, state, state.clock + dt)
     frame = Frame(
         buckets.slots,

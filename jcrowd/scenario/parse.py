@@ -244,7 +244,7 @@ def parse_scenario(
         dynamics=r.build(
             "dynamics",
             DynamicsSettings,
-            **r.table(doc.get("dynamics", {}), "dynamics", ("avoid", "radius")),
+            **r.table(doc.get("dynamics", {}), "dynamics", ("avoid", "radius", "far_every")),
         ),
         sources=r.sources(doc),
     )

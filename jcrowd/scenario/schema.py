@@ -284,16 +284,22 @@ class LodSettings:
 class DynamicsSettings:
     """Crowd dynamics (``[dynamics]``). ``avoid``: agents avoid each other (the collision-free
     speed model drives every root; off: each walks its clips towards its waypoints as if alone).
-    ``radius``: the body disc kept clear around each agent (m, 0.1–0.4)."""
+    ``radius``: the body disc kept clear around each agent (m, 0.1–0.4). ``far_every``:
+    agents drawn coarser than the blended near levels, or not drawn, compute their avoidance
+    every ``far_every`` steps, in turn (1–8; 1: every agent every step)."""
 
     avoid: bool = False
     radius: float = 0.2
+    far_every: int = 1
 
     def __post_init__(self) -> None:
         require(isinstance(self.avoid, bool), "avoid", "true or false", self.avoid)
         r = self.radius
         require(real(r) and 0.1 <= r <= 0.4, "radius", "a radius in [0.1, 0.4] (m)", r)
         object.__setattr__(self, "radius", float(r))
+        k = self.far_every
+        ok = isinstance(k, int) and not isinstance(k, bool) and 1 <= k <= 8
+        require(ok, "far_every", "an integer in [1, 8] (steps)", k)
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
