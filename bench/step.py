@@ -317,7 +317,7 @@ def main() -> None:
         "step",
         f"{out['machine']}, jax {out['jax']}, {out['device']} × {out['devices']}"
         + (", avoidance on" if args.avoid else "")
-        + (f", far agents every {args.far_every} steps" if args.avoid and args.far_every > 1 else ""),
+        + (f", far agents every {args.far_every} steps" if args.far_every > 1 else ""),
         out,
         text,
         args.json,
