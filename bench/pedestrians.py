@@ -16,10 +16,16 @@ Sections (``--sections``, default all):
   positions; flow through the gap (middle 80 % of crossings), first-to-last crossing time,
   Voronoi density in front of the gap.
 - ``fd``: each HERMES run (``--hermes DIR``; file names ``uo-<entrance>-<corridor>-<exit>`` in
-  cm) re-simulated: people are fed in where and when the measurement first sees them (just
-  behind the entrance, so the measured entrance flow is the input), the exit opening is a gap of
-  the run's width in a 0.2 m wall at the corridor's end; Voronoi density and speed in the
-  measurement area over the run's steady state; Weidmann's curve as a second reference.
+  cm) re-simulated: each person is fed in at the corridor's entrance — at ``y = 3.8`` m, 0.2 m
+  inside it — when and where the measurement sees them cross that line (so the run's entrance
+  width is in the measured crossing points, and the measured entrance flow is the input); the
+  exit opening is a gap of the run's width in a 0.2 m wall at the corridor's end; Voronoi
+  density and speed in the measurement area over the run's steady state; Weidmann's curve as a
+  second reference. (The reading taken: "fed in at the entrance" is the entrance line.
+  Feeding people in where the camera first sees them, 3.8 m further up in the holding area,
+  makes the model's merge into the corridor the bottleneck instead: both models then carry
+  about 2 /s through the 1.8 m entrance where 2.9 /s were measured — row 2026-12-01, code
+  c092641.)
 - ``speed``: median ms per step of the dynamics alone at 0.5 agents/m² walking across a square
   with 2 m pillars every 25 m (the issue's "open area with obstacles"; JuPedSim's step cost
   grows with the obstacles) and across the same square without them, jcrowd vs JuPedSim (one
@@ -41,6 +47,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
+import sys
 import time
 from pathlib import Path
 
@@ -253,7 +260,9 @@ def bottleneck(widths, out):
         theirs.append(middle_flow(crossings(jp, ja, 1, 10.0, +1.0)))
         safe.append(safety(p, a, area))
         print(
-            f"bottleneck {w} m: jcrowd {ours[-1]:.2f} /s, JuPedSim {theirs[-1]:.2f} /s", flush=True
+            f"bottleneck {w} m: jcrowd {ours[-1]:.2f} /s, JuPedSim {theirs[-1]:.2f} /s",
+            file=sys.stderr,
+            flush=True,
         )
     fit = np.polyfit(widths, ours, 1)
     pred = np.polyval(fit, widths)
@@ -335,7 +344,7 @@ def entrance(out):
     out["jupedsim_entrance"] = {k: round(v, 3) for k, v in res["jupedsim"].items()}
     out["entrance_measured"] = {"flow": 1.16, "total": 64.5, "density": 5.9}
     out["safety"]["entrance"] = safety(p, a, area, r)
-    print(f"entrance: {res}", flush=True)
+    print(f"entrance: {res}", file=sys.stderr, flush=True)
 
 
 def _entrance_density(pos, alive, area, times):
@@ -386,6 +395,25 @@ def hermes_scene(exit_cm):
     return area, shapely.box(-1.0, -6.5, 2.8, -6.0)
 
 
+FEED_Y = 3.8  # m: people enter the simulation 0.2 m inside the corridor's entrance (y = 4)
+
+
+def hermes_feed(d):
+    """Where and when each person of a HERMES run (rows ``id frame x y`` in metres) enters:
+    their first frame below ``FEED_Y`` (their first frame if none is), ``x`` kept a radius (and
+    2 cm: JuPedSim refuses agents touching a wall) inside the 1.8 m corridor. The run's entrance
+    width is in where the measured people cross the line."""
+    ids = np.unique(d[:, 0])
+    xy, t = np.zeros((len(ids), 2)), np.zeros(len(ids))
+    for k, i in enumerate(ids):
+        rows = d[d[:, 0] == i]
+        below = rows[:, 3] < FEED_Y
+        row = rows[np.argmax(below)] if below.any() else rows[0]
+        xy[k], t[k] = (row[2], min(row[3], FEED_Y)), row[1] / HERMES_FPS
+    xy[:, 0] = np.clip(xy[:, 0], RADIUS + 0.02, 1.8 - RADIUS - 0.02)
+    return xy, t
+
+
 def weidmann(rho):
     return 1.34 * (1 - np.exp(-1.913 * (1 / np.maximum(rho, 1e-3) - 1 / 5.4)))
 
@@ -399,13 +427,7 @@ def fd(folder, out):
             continue
         d = np.loadtxt(f, comments="#")
         d[:, 2:4] /= 100.0  # cm -> m
-        ids = np.unique(d[:, 0])
-        first = np.array([d[d[:, 0] == i][0] for i in ids])
-        spawn_xy, spawn_t = first[:, 2:4].copy(), first[:, 1] / HERMES_FPS
-        # First seen at the camera's edge, up to y = 8 m: moved inside the holding area by a
-        # radius (JuPedSim refuses agents touching a wall).
-        spawn_xy[:, 0] = np.clip(spawn_xy[:, 0], -1.0 + RADIUS + 0.02, 2.8 - RADIUS - 0.02)
-        spawn_xy[:, 1] = np.minimum(spawn_xy[:, 1], 8.0 - RADIUS - 0.02)
+        spawn_xy, spawn_t = hermes_feed(d)
         area, target = hermes_scene(float(m.group(3)))
         t_ref = d[:, 1].max() / HERMES_FPS
         measured = _fd_measure(d, HERMES_FPS, steady.loc[f.stem], HERMES_AREA)
@@ -425,7 +447,7 @@ def fd(folder, out):
                 "safety": safety(p, a, area),
             }
         )
-        print(f"fd {rows[-1]}", flush=True)
+        print(f"fd {rows[-1]}", file=sys.stderr, flush=True)
     ms = np.array([r["measured_speed"] for r in rows])
     out["fd"] = rows
     out["fd_speed_rmse_m_s"] = round(
@@ -552,6 +574,7 @@ def speed(sizes, out, pillars=True):
         theirs[size] = float(np.median(ts))
         print(
             f"speed {size}: jcrowd {1e3 * ours[size]:.1f} ms, JuPedSim {1e3 * theirs[size]:.1f} ms",
+            file=sys.stderr,
             flush=True,
         )
     tag = "" if pillars else "_open"

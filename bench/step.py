@@ -244,6 +244,8 @@ def run_count(
         hist += np.bincount(np.asarray(frame.level), minlength=len(hist))
         dots += int(np.asarray(frame.dots).sum())
     ms = 1e3 * float(np.median(times))
+    steps_s = 150 if n <= 100_000 else 30
+    safety = _safety(fn, jax.tree.map(jnp.copy, state), view, dt, steps_s) if avoid else {}
     state_bytes = sum(x.nbytes for x in jax.tree.leaves(state))
     refresh = sim.config.refresh or n // 32 + 64
     roof_ms = roof_bytes(state, frame, min(refresh, n)) / (bw * 1e9) * 1e3
@@ -259,8 +261,27 @@ def run_count(
         "roof_ms_per_step": roof_ms,
         "recompiles": fn._cache_size() - 1,
         "crowding": int(frame.crowding),
+        **safety,
         "_sim": (sim, state),
     }
+
+
+def _safety(fn: Any, state: Any, view: Any, dt: Any, steps: int) -> dict[str, Any]:
+    """Over ``steps`` more steps, every alive agent at every step: the smallest centre distance
+    ÷ (rᵢ + rⱼ) to its nearest neighbour (a k-d tree, SciPy) and the non-finite roots."""
+    from scipy.spatial import cKDTree
+
+    worst, nan = np.inf, 0
+    for _ in range(steps):
+        state, _ = fn(state, view, dt)
+        alive = np.asarray(state.alive)
+        p = np.stack([np.asarray(state.x), np.asarray(state.z)], 1)[alive]
+        finite = np.isfinite(p).all(axis=1)
+        nan += int((~finite).sum())
+        p, r = p[finite], np.asarray(state.radius)[alive][finite]
+        d, j = cKDTree(p).query(p, k=2)
+        worst = min(worst, float(np.min(d[:, 1] / (r + r[j[:, 1]]))))
+    return {"min_gap_ratio": round(worst, 3), "nan": nan, "safety_steps": steps}
 
 
 def main() -> None:
@@ -331,6 +352,7 @@ def _table(out: dict[str, Any]) -> str:
         "(mean) | of which dots | state B/agent | roof ms | naive ms | speed-up vs naive |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
+    safety = [r for r in out["rows"] if "min_gap_ratio" in r]
     for r in out["rows"]:
         n = str(r["agents"])
         hist = " / ".join(f"{v:g}" for v in r["level_histogram"])
@@ -347,6 +369,17 @@ def _table(out: dict[str, Any]) -> str:
         f"{out['full_detail_agent_frames_per_s']:.3g} agent-frames/s; "
         f"copy bandwidth {out['bandwidth_gbs']:.1f} GB/s",
     ]
+    if safety:
+        lines += [
+            "",
+            "safety over the next steps, every alive agent (closest centre distance ÷ (rᵢ + rⱼ);"
+            " non-finite roots): "
+            + "; ".join(
+                f"{r['agents']:,} (min px {r['min_pixels']:g}): {r['min_gap_ratio']:.3f} over "
+                f"{r['safety_steps']} steps, nan {r['nan']}"
+                for r in safety
+            ),
+        ]
     return "\n".join(lines)
 
 

@@ -134,30 +134,46 @@ def cell_list(spec: GridSpec, position: Float[Array, "N 2"], alive: Bool[Array, 
     """Sort the alive agents into the grid's cells, ``capacity`` per cell, in agent order.
 
     Ranks are claimed in rounds: in round ``r`` every cell gives rank ``r`` to the lowest id
-    among its agents not yet ranked (a scatter-min over the agents), until every agent is
+    among its agents not yet ranked (a scatter-max of round-stamped marks over the agents),
+    until every agent is
     ranked or ``capacity`` rounds have run (the rounds stop at the fullest cell's count, a
     handful where people walk apart); the agents left over are counted in ``overflow``. Then
     each cell's count, their running sum (the starts) and every agent's place
     ``start[cell] + rank``.
     """
     n, ncell = position.shape[0], spec.num_cells
+    if (spec.capacity + 1) * (n + 1) >= 2**31:
+        raise JcrowdError(
+            f"cell_list: expected (capacity + 1)·(agents + 1) < 2³¹ (int32 round marks), found "
+            f"capacity {spec.capacity} and {n} agents"
+        )
     ix, iz = _cell_coords(spec, position)
     cell = jnp.where(alive, ix * spec.shape[1] + iz, ncell).astype(jnp.int32)
     ids = jnp.arange(n, dtype=jnp.int32)
 
-    def more(carry: tuple[Array, Array, Array]) -> Array:
-        r, placed, _ = carry
+    # One table for all rounds: round r writes (r + 1)·(N + 1) − id, and a scatter-max keeps
+    # this round's lowest id over the marks of earlier rounds (no table reset per round).
+    stamp = n + 1
+
+    def more(carry: tuple[Array, Array, Array, Array]) -> Array:
+        r, placed, _, _ = carry
         return (r < spec.capacity) & ~jnp.all(placed)
 
-    def round_(carry: tuple[Array, Array, Array]) -> tuple[Array, Array, Array]:
-        r, placed, rank = carry
+    def round_(carry: tuple[Array, Array, Array, Array]) -> tuple[Array, Array, Array, Array]:
+        r, placed, rank, table = carry
         key = jnp.where(placed, ncell, cell)
-        lowest = jnp.full((ncell,), n, jnp.int32).at[key].min(ids, mode="drop")
-        won = ~placed & (lowest[jnp.minimum(key, ncell - 1)] == ids)
-        return r + 1, placed | won, jnp.where(won, r, rank)
+        mark = (r + 1) * stamp - ids
+        table = table.at[key].max(mark, mode="drop")
+        won = ~placed & (table[jnp.minimum(key, ncell - 1)] == mark)
+        return r + 1, placed | won, jnp.where(won, r, rank), table
 
-    start_carry = (jnp.zeros((), jnp.int32), cell >= ncell, jnp.full((n,), -1, jnp.int32))
-    _, _, rank = jax.lax.while_loop(more, round_, start_carry)
+    start_carry = (
+        jnp.zeros((), jnp.int32),
+        cell >= ncell,
+        jnp.full((n,), -1, jnp.int32),
+        jnp.zeros((ncell,), jnp.int32),
+    )
+    _, _, rank, _ = jax.lax.while_loop(more, round_, start_carry)
     stored = rank >= 0
     counts = jnp.zeros((ncell,), jnp.int32).at[jnp.where(stored, cell, ncell)].add(1, mode="drop")
     start = jnp.concatenate([jnp.zeros((1,), jnp.int32), jnp.cumsum(counts, dtype=jnp.int32)])
