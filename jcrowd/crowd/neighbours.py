@@ -135,9 +135,10 @@ def cell_list(spec: GridSpec, position: Float[Array, "N 2"], alive: Bool[Array, 
 
     Ranks are claimed in rounds: in round ``r`` every cell gives rank ``r`` to the lowest id
     among its agents not yet ranked (a scatter-max of round-stamped marks over the agents),
-    until every agent is
-    ranked or ``capacity`` rounds have run (the rounds stop at the fullest cell's count, a
-    handful where people walk apart); the agents left over are counted in ``overflow``. Then
+    until every agent is ranked or ``capacity`` rounds have run (the rounds stop at the fullest
+    cell's count, a handful where people walk apart; after round 0 they run on a bucket of the
+    agents still unranked when an eighth of the crowd holds them); the agents left over are
+    counted in ``overflow``. Then
     each cell's count, their running sum (the starts) and every agent's place
     ``start[cell] + rank``.
     """
@@ -155,25 +156,43 @@ def cell_list(spec: GridSpec, position: Float[Array, "N 2"], alive: Bool[Array, 
     # this round's lowest id over the marks of earlier rounds (no table reset per round).
     stamp = n + 1
 
-    def more(carry: tuple[Array, Array, Array, Array]) -> Array:
-        r, placed, _, _ = carry
-        return (r < spec.capacity) & ~jnp.all(placed)
+    def rounds(r0: Array, cell_k: Array, ids_k: Array, rank_k: Array, table: Array) -> tuple:
+        """Rounds from ``r0`` for the agents ``ids_k`` (in increasing order; ``cell_k`` their
+        cells, ``ncell`` for none), until all are ranked or ``capacity`` rounds have run."""
 
-    def round_(carry: tuple[Array, Array, Array, Array]) -> tuple[Array, Array, Array, Array]:
-        r, placed, rank, table = carry
-        key = jnp.where(placed, ncell, cell)
-        mark = (r + 1) * stamp - ids
-        table = table.at[key].max(mark, mode="drop")
-        won = ~placed & (table[jnp.minimum(key, ncell - 1)] == mark)
-        return r + 1, placed | won, jnp.where(won, r, rank), table
+        def more(carry: tuple[Array, Array, Array, Array]) -> Array:
+            r, placed, _, _ = carry
+            return (r < spec.capacity) & ~jnp.all(placed)
 
-    start_carry = (
-        jnp.zeros((), jnp.int32),
-        cell >= ncell,
-        jnp.full((n,), -1, jnp.int32),
-        jnp.zeros((ncell,), jnp.int32),
-    )
-    _, _, rank, _ = jax.lax.while_loop(more, round_, start_carry)
+        def round_(carry: tuple[Array, Array, Array, Array]) -> tuple[Array, Array, Array, Array]:
+            r, placed, rank, table = carry
+            key = jnp.where(placed, ncell, cell_k)
+            mark = (r + 1) * stamp - ids_k
+            table = table.at[key].max(mark, mode="drop")
+            won = ~placed & (table[jnp.minimum(key, ncell - 1)] == mark)
+            return r + 1, placed | won, jnp.where(won, r, rank), table
+
+        start = (r0, (cell_k >= ncell) | (rank_k >= 0), rank_k, table)
+        _, _, rank_k, table = jax.lax.while_loop(more, round_, start)
+        return rank_k, table
+
+    # Round 0 for everyone; where people walk apart it ranks nearly all of them, and the later
+    # rounds run on a bucket of the agents left (an eighth of the crowd) when they fit in it.
+    no_rank = jnp.full((n,), -1, jnp.int32)
+    rank, table = _first_round(cell, ids, ncell, stamp, no_rank)
+    left = (cell < ncell) & (rank < 0)
+    bucket = max(1, n // 8)
+
+    def in_bucket() -> Array:
+        (idx,) = jnp.nonzero(left, size=bucket, fill_value=n)
+        cell_b = jnp.where(idx < n, cell[jnp.minimum(idx, n - 1)], ncell)
+        rank_b, _ = rounds(jnp.ones((), jnp.int32), cell_b, idx, no_rank[:bucket], table)
+        return rank.at[idx].set(rank_b, mode="drop")
+
+    def everyone() -> Array:
+        return rounds(jnp.ones((), jnp.int32), cell, ids, rank, table)[0]
+
+    rank = jax.lax.cond(jnp.sum(left) <= bucket, in_bucket, everyone)
     stored = rank >= 0
     counts = jnp.zeros((ncell,), jnp.int32).at[jnp.where(stored, cell, ncell)].add(1, mode="drop")
     start = jnp.concatenate([jnp.zeros((1,), jnp.int32), jnp.cumsum(counts, dtype=jnp.int32)])
@@ -181,6 +200,16 @@ def cell_list(spec: GridSpec, position: Float[Array, "N 2"], alive: Bool[Array, 
     order = jnp.full((n,), n, jnp.int32).at[place].set(ids, mode="drop")
     overflow = jnp.sum(alive & ~stored, dtype=jnp.int32)
     return CellList(order, start, place, cell, overflow)
+
+
+def _first_round(
+    cell: Array, ids: Array, ncell: int, stamp: int, rank: Array
+) -> tuple[Array, Array]:
+    """Round 0 of :func:`cell_list`: each cell ranks its lowest id 0."""
+    mark = stamp - ids
+    table = jnp.zeros((ncell,), jnp.int32).at[cell].max(mark, mode="drop")
+    won = (cell < ncell) & (table[jnp.minimum(cell, ncell - 1)] == mark)
+    return jnp.where(won, 0, rank), table
 
 
 def _runs(
