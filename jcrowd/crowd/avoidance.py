@@ -31,6 +31,7 @@ ids (:func:`jcrowd.crowd.neighbours.candidates`, ``N`` for none) and walls as se
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from functools import partial
 
 import equinox as eqx
@@ -272,7 +273,11 @@ def avoid_in_grid(
             full, _ = near_places(grid, cells, position, k, own)
             return velocities(everyone, full)
 
-        branches = [keep, *(partial(in_bucket, b=b) for b in buckets), all_agents]
+        branches: list[Callable[[Array], Array]] = [
+            keep,
+            *(partial(in_bucket, b=b) for b in buckets),
+            all_agents,
+        ]
         larger = sum((n_dense > b).astype(jnp.int32) for b in buckets)
         which = jnp.where(n_dense == 0, 0, 1 + larger)
         velocity = jax.lax.switch(which, branches, velocity)

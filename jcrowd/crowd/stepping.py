@@ -290,8 +290,8 @@ def step(
             n = state.x.shape[0]
             near_slots = sum(config.capacities[: config.blend_max_level + 1])
             size = min(n, -(-n // config.far_every) + near_slots)
-            near = buckets.level <= config.blend_max_level
-            due = due_rows(near, state.clock, dt, config.far_every, size)
+            drawn_near = buckets.level <= config.blend_max_level
+            due = due_rows(drawn_near, state.clock, dt, config.far_every, size)
         vx, vz, crowding = steer(
             grid,
             state.x,
