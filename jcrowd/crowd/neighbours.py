@@ -20,7 +20,7 @@ scatter-min — round ``r`` places the lowest unplaced id of every cell — whic
 several times faster than sorting the crowd: 23 ms to sort 100k keys on this VM.)
 
 Conventions: ground positions are ``[x, z]`` in metres (the crowd step's layout); agent ids run
-``0 … N − 1`` and ``N`` marks an empty slot. Positions outside the grid are clamped into its
+``0 … N − 1`` and ``N`` marks no agent. Positions outside the grid are clamped into its
 border cells, so nobody is lost; the grid should still cover the walkable area, or the border
 cells fill up.
 """
@@ -57,7 +57,7 @@ class GridSpec:
         origin: ``(x, z)`` of the grid's lower corner (m).
         cell: cell edge (m), at least the interaction range.
         shape: cells along x and along z.
-        capacity: agent slots per cell.
+        capacity: the most agents a cell stores (more are counted as overflow).
     """
 
     origin: tuple[float, float]
@@ -82,7 +82,7 @@ def grid_spec(
 
     The capacity holds ``max_density`` agents per m² (8 /m² is beyond the densest crowds
     measured in the shared experiments, 9.3 /m² at its peak in front of a bottleneck, averaged
-    over a cell) times ``headroom``, and at least 4 slots.
+    over a cell) times ``headroom``, and at least 4 agents.
 
     Raises:
         JcrowdError: a cell that is not positive or a rectangle without area.
