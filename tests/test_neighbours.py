@@ -89,7 +89,7 @@ def test_outside_agents_are_clamped_into_border_cells():
 
 @settings(max_examples=25, deadline=None)
 @given(
-    n=st.integers(1, 80),
+    n=st.integers(0, 80),
     cell=st.floats(0.3, 4.0),
     seed=st.integers(0, 10_000),
 )
@@ -171,3 +171,16 @@ def test_compact_candidates_for_a_block_use_its_rows():
     part, part_n = compact_candidates(spec, cl, jnp.asarray(pos)[ids], 40, ids)
     np.testing.assert_array_equal(np.asarray(part), np.asarray(whole)[1::2])
     np.testing.assert_array_equal(np.asarray(part_n), np.asarray(whole_n)[1::2])
+
+
+def test_an_empty_crowd_and_a_lone_agent():
+    """Edge cases of the rounds and the bucket: no agents at all (every cell empty, nothing
+    counted) and one agent (stored first, no candidates)."""
+    spec = grid_spec((0.0, 0.0), (10.0, 10.0), 1.6)
+    empty = cell_list(spec, jnp.zeros((0, 2)), jnp.zeros(0, bool))
+    assert empty.order.shape == (0,) and int(empty.overflow) == 0
+    assert (np.asarray(empty.start) == 0).all()
+    one = cell_list(spec, jnp.ones((1, 2)), jnp.ones(1, bool))
+    assert int(one.place[0]) == 0 and int(one.order[0]) == 0 and int(one.start[-1]) == 1
+    cand = np.asarray(candidates(spec, one, jnp.ones((1, 2))))
+    assert (cand == 1).all()

@@ -151,6 +151,9 @@ def cell_list(spec: GridSpec, position: Float[Array, "N 2"], alive: Bool[Array, 
     ix, iz = _cell_coords(spec, position)
     cell = jnp.where(alive, ix * spec.shape[1] + iz, ncell).astype(jnp.int32)
     ids = jnp.arange(n, dtype=jnp.int32)
+    if n == 0:  # nobody: every cell empty
+        none = jnp.zeros((0,), jnp.int32)
+        return CellList(none, jnp.zeros((ncell + 1,), jnp.int32), none, none, jnp.int32(0))
 
     # One table for all rounds: round r writes (r + 1)·(N + 1) − id, and a scatter-max keeps
     # this round's lowest id over the marks of earlier rounds (no table reset per round).
