@@ -149,3 +149,19 @@ def test_far_every_errors_name_the_key(value):
     text = PLAZA.replace("far_every = {every}", f"far_every = {value}").format()
     with pytest.raises(JcrowdError, match=r"dynamics.far_every: expected an integer in \[1, 8\]"):
         parse_scenario(text, "plaza.toml")
+
+
+def test_a_spawn_region_too_small_to_spread_agents_names_the_group():
+    """With avoidance on, 500 agents of radius 0.2 m in 12 m × 10 m (the plaza's corner walkers
+    before they got room: 4.2 per m², where random placement two radii apart fails) are refused
+    with the key path and the room they need; the same with avoidance off is accepted."""
+    text = PLAZA.format(every=1).replace(
+        'count = 60\nspawn = { shape = "rect", center = [-8, 0], size = [6, 10] }',
+        'count = 500\nspawn = { shape = "rect", center = [-8, 0], size = [12, 10] }',
+    )
+    assert "count = 500" in text
+    with pytest.raises(JcrowdError, match=r"groups\[0\]\.spawn: expected room for 500 agents two"):
+        parse_scenario(text, "plaza.toml")
+    with pytest.raises(JcrowdError, match=r"≥ 188 m² free, ≤ 2.65 per m²\), found 120 m² free"):
+        parse_scenario(text, "plaza.toml")
+    parse_scenario(text.replace("avoid = true", "avoid = false"), "plaza.toml")
