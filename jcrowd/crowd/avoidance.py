@@ -60,7 +60,6 @@ BUCKET_DIVISORS = (64, 8)
 """The agents moving on to a tier are evaluated in the smallest bucket of ``N / d`` agents
 (at least 64) that holds them all, else all ``N`` agents are (one branch runs)."""
 
-BARRIER = False
 _TINY = 1e-6  # m: distances below this count as coincident (direction left undefined → 0)
 
 
@@ -167,8 +166,6 @@ def avoid(
     pz = jnp.concatenate([all_pos[:, 1], jnp.zeros((1,), z.dtype)])[neighbours]
     pr = jnp.concatenate([all_rad, jnp.zeros((1,), radius.dtype)])[neighbours]
     valid = neighbours < n
-    if BARRIER:
-        px, pz, pr, valid = jax.lax.optimization_barrier((px, pz, pr, valid))
     dx, dz = x[:, None] - px, z[:, None] - pz  # from j to i
     dist = jnp.sqrt(dx * dx + dz * dz)
     inv = jnp.where(dist > _TINY, 1.0 / jnp.maximum(dist, _TINY), 0.0)
