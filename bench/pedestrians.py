@@ -32,8 +32,17 @@ Sections (``--sections``, default all):
   core). ``--cpu-devices K`` splits jcrowd's step over K CPU devices
   (:func:`jcrowd.crowd.split_pedestrian_step`; default 1); the row says how many.
 
+- ``counterflow``: the plaza's two head-on groups (1,500 people, 70 m fronts) on an open
+  square, pure dynamics: the share that has left after 40 s with jcrowd's two avoidance models
+  and JuPedSim's collision-free speed and anticipation velocity models, from the same start.
+
 - ``plaza``: ``examples/plaza.toml`` with avoidance in the animated crowd step (its groups cross
-  head-on and at right angles), for three times its longest free-walking route: safety only.
+  head-on and at right angles), for three times its longest free-walking route, with each
+  avoidance model: safety, and each agent's arrival time ÷ its free-walking time.
+
+``--model`` (``anticipation`` or ``collision-free-speed``, default ``collision-free-speed``):
+jcrowd's model in the bottleneck, entrance and fd sections. The speed section always compares
+the collision-free speed model with JuPedSim's (the same model on both sides).
 
 Safety over every jcrowd scene: ``min_gap_ratio`` (smallest centre distance ÷ (r_i + r_j)),
 ``inside_obstacle`` (agent-frames whose centre is outside the walkable area), ``nan``, and
@@ -83,6 +92,10 @@ SPAWN_GAP = 2.05  # an entering agent waits until nobody is within 2.05 radii of
 # ------------------------------------------------------------------------------ two simulators
 
 
+MODEL = "collision-free-speed"
+"""jcrowd's avoidance model in the bottleneck, entrance and fd sections (``--model``)."""
+
+
 def run_jcrowd(area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RADIUS, gap=SPAWN_GAP):
     """jcrowd's dynamics; agents appear at ``spawn_t`` once their spot is free.
 
@@ -99,6 +112,7 @@ def run_jcrowd(area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RADIU
         jnp.full(n, speed, jnp.float32),
         jnp.full(n, radius, jnp.float32),
         jnp.zeros(n, bool),
+        jnp.zeros((n, 2), jnp.float32) if MODEL == "anticipation" else None,
     )
 
     def one(carry, t):
@@ -112,12 +126,14 @@ def run_jcrowd(area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RADIU
             n, k=-1, dtype=bool
         )
         appear = appear & ~jnp.any(close & appear[None], axis=1)
+        velocity = None if peds.velocity is None else jnp.where(appear[:, None], 0.0, peds.velocity)
         peds = Pedestrians(
             jnp.where(appear[:, None], xy, p),
             peds.target,
             peds.speed,
             peds.radius,
             peds.alive | appear,
+            velocity,
         )
         peds, _ = pedestrian_step(params, world, peds, DT)
         return (peds, pending & ~appear), (peds.position, peds.alive)
@@ -511,19 +527,23 @@ def _fd_measure_sim(pos, alive, window, area):
 # ------------------------------------------------------------------------------ plaza
 
 
-def plaza(out):
+def plaza(out, model="anticipation"):
     """Safety of the counter-flow plaza (``examples/plaza.toml`` with ``[dynamics] avoid =
-    true``) in the animated crowd step, one device: every step, the closest pair ÷ (rᵢ + rⱼ)
-    (SciPy k-d tree) and non-finite roots over the agents in the scene; at the end, ``stuck``:
-    agents with an end (not looping) still in the scene and farther than the waypoint reach
-    from their last waypoint, after three times the longest free-walking time of the routes."""
+    true`` and ``model``) in the animated crowd step, one device: every step, the closest pair
+    ÷ (rᵢ + rⱼ) (SciPy k-d tree) and non-finite roots over the agents in the scene; at the end,
+    ``stuck``: agents with an end (not looping) still in the scene and farther than the
+    waypoint reach from their last waypoint, after three times the longest free-walking time
+    of the routes. How well the groups pass each other: ``plaza_arrival_ratio`` (p50, p90 over
+    the agents with an end) of the time an agent took to arrive (leave, or come within the
+    reach of its last waypoint) ÷ its route's length at its free speed (1: never slowed)."""
     from scipy.spatial import cKDTree
 
     from jcrowd import load_default_model
     from jcrowd.crowd import prepare
     from jcrowd.scenario import parse_scenario
 
-    text = (ROOT / "examples" / "plaza.toml").read_text() + "\n[dynamics]\navoid = true\n"
+    text = (ROOT / "examples" / "plaza.toml").read_text()
+    text = text.split("[dynamics]")[0] + f'\n[dynamics]\navoid = true\nmodel = "{model}"\n'
     sim, state = prepare(parse_scenario(text, "plaza.toml"), load_default_model())
     sp = sim.spawn
     ends = sp.waypoints[np.arange(len(sp.speed)), sp.num_waypoints - 1]
@@ -534,10 +554,13 @@ def plaza(out):
     fn, view, dt = sim.compiled(), sim.view_at(0.0), sim.dt_array
     worst, nan = np.inf, 0
     steps = math.ceil(t_run / sim.dt)
-    for _ in range(steps):
+    arrived = np.full(len(finite), np.inf)
+    for k in range(steps):
         state, _ = fn(state, view, dt)
         alive = np.asarray(state.alive)
         p = np.stack([np.asarray(state.x), np.asarray(state.z)], axis=1)
+        there = ~alive | (np.linalg.norm(p - ends, axis=1) <= sim.config.reach)
+        arrived = np.where(np.isinf(arrived) & there, (k + 1) * sim.dt, arrived)
         ok = alive & np.isfinite(p).all(axis=1)
         nan += int((alive & ~ok).sum())
         if ok.sum() > 1:
@@ -546,15 +569,134 @@ def plaza(out):
             worst = min(worst, float(np.min(d[:, 1] / (r + r[j[:, 1]]))))
     far = np.linalg.norm(p - ends, axis=1) > sim.config.reach
     stuck = int((finite & alive & far).sum())
-    out["safety"]["plaza"] = {
+    key = "plaza" if model == "anticipation" else f"plaza_{model}"
+    out["safety"][key] = {
         "min_gap_ratio": round(worst, 3),
         "inside_obstacle": 0,  # the plaza has no obstacles
         "nan": nan,
         "stuck": stuck,
     }
+    ratio = arrived[finite] / (route[finite] / sp.speed[finite])
+    out.setdefault("plaza_arrival_ratio", {})[model] = {
+        "p50": round(float(np.percentile(ratio, 50)), 2),
+        "p90": round(float(np.percentile(ratio, 90)), 2),
+    }
     out["plaza_seconds"] = round(t_run, 1)
     out["plaza_agents_with_an_end"] = int(finite.sum())
-    print(f"plaza: {out['safety']['plaza']} after {t_run:.0f} s", file=sys.stderr, flush=True)
+    print(
+        f"plaza ({model}): {out['safety'][key]}, arrival ÷ free time "
+        f"{out['plaza_arrival_ratio'][model]} after {t_run:.0f} s",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+# ------------------------------------------------------------------------------ counterflow
+
+COUNTERFLOW_S = 40.0
+"""How long the counter-flow scene runs (s)."""
+
+
+def counterflow(out):
+    """The plaza's two head-on groups (``examples/plaza.toml``: 800 walking north from
+    ``z ≈ −46``, 700 south from ``z ≈ −22``, 70 m wide fronts, 0.6 /m²; same start positions and
+    free speeds on every side) on an open 120 m square, each group leaving through a strip
+    beyond the other, for :data:`COUNTERFLOW_S` s: jcrowd's dynamics with both avoidance models
+    and JuPedSim's collision-free speed and anticipation velocity models (defaults).
+    ``counterflow_left``: the share that has left. ``docs/pedestrians_counterflow.png``: the
+    two groups seen from above at 10 and 20 s."""
+    from jcrowd import load_default_model
+    from jcrowd.crowd import prepare
+    from jcrowd.scenario import parse_scenario
+
+    scenario = parse_scenario((ROOT / "examples" / "plaza.toml").read_text(), "plaza.toml")
+    sim, _ = prepare(scenario, load_default_model())
+    group = np.repeat(np.arange(len(scenario.groups)), [g.count for g in scenario.groups])
+    head_on = group < 2  # northbound, southbound
+    xy = sim.spawn.position[head_on].astype(np.float32)
+    v0 = sim.spawn.speed[head_on].astype(np.float32)
+    g = group[head_on]
+    exits = [shapely.box(-35, 46, 35, 54), shapely.box(-30, -60, 40, -56)]
+    area = shapely.box(-60, -60, 60, 60)
+    steps = round(COUNTERFLOW_S / DT)
+    shots = (round(10 / DT), round(20 / DT))
+    n = len(xy)
+    snaps, left = {}, {}
+
+    world = build_world(area, exits, nav_cell=0.25)
+    step = jax.jit(pedestrian_step)
+    for model in ("anticipation", "collision-free-speed"):
+        e0 = np.where(g[:, None] == 0, [0.0, 1.0], [0.0, -1.0]).astype(np.float32)
+        peds = Pedestrians(
+            jnp.asarray(xy),
+            jnp.asarray(g, jnp.int32),
+            jnp.asarray(v0),
+            jnp.full(n, RADIUS, jnp.float32),
+            jnp.ones(n, bool),
+            jnp.asarray(e0 * v0[:, None]) if model == "anticipation" else None,
+        )
+        name = f"jcrowd {model}"
+        for k in range(1, steps + 1):
+            peds, _ = step(AvoidanceParams(), world, peds, jnp.float32(DT))
+            if k in shots:
+                snaps[name, k] = (np.asarray(peds.position), np.asarray(peds.alive))
+        left[name] = round(1.0 - float(np.mean(np.asarray(peds.alive))), 3)
+    for model in ("CollisionFreeSpeedModel", "AnticipationVelocityModel"):
+        sim_j = jps.Simulation(model=getattr(jps, model)(), geometry=area, dt=DT)
+        stages = [sim_j.add_exit_stage(e) for e in exits]
+        journeys = [sim_j.add_journey(jps.JourneyDescription([st])) for st in stages]
+        params = getattr(jps, f"{model}AgentParameters")
+        row = {}
+        for i in range(n):
+            agent = params(
+                journey_id=journeys[g[i]],
+                stage_id=stages[g[i]],
+                position=tuple(map(float, xy[i])),
+                desired_speed=float(v0[i]),
+                radius=RADIUS,
+            )
+            row[sim_j.add_agent(agent)] = i
+        name = f"JuPedSim {model}"
+        for k in range(1, steps + 1):
+            sim_j.iterate()
+            if k in shots:
+                p, a = np.full((n, 2), np.nan), np.zeros(n, bool)
+                for agent in sim_j.agents():
+                    p[row[agent.id]], a[row[agent.id]] = agent.position, True
+                snaps[name, k] = (p, a)
+        left[name] = round(1.0 - sim_j.agent_count() / n, 3)
+    out["counterflow_left"] = left
+    out["counterflow_seconds"] = COUNTERFLOW_S
+    print(f"counterflow: left after {COUNTERFLOW_S:.0f} s {left}", file=sys.stderr, flush=True)
+    if MODEL == "collision-free-speed":
+        _plot_counterflow(snaps, g, shots)
+
+
+def _plot_counterflow(snaps, g, shots):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(dict.fromkeys(name for name, _ in snaps))
+    fig, axes = plt.subplots(
+        len(shots), len(names), figsize=(3.2 * len(names), 5.6), sharex=True, sharey=True
+    )
+    for c, name in enumerate(names):
+        for r, k in enumerate(shots):
+            p, a = snaps[name, k]
+            ax = axes[r, c]
+            for gg, colour in ((0, "tab:red"), (1, "tab:blue")):
+                m = a & (g == gg)
+                ax.scatter(p[m, 0], p[m, 1], s=0.6, c=colour)
+            ax.set_title(f"{name.replace('Model', '')}, {k * DT:.0f} s", fontsize=8)
+            ax.set_aspect("equal")
+            ax.set_xlim(-40, 45)
+            ax.set_ylim(-60, 0)
+    fig.suptitle("Counter-flow: north (red) and south (blue) from the same start", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(ROOT / "docs" / "pedestrians_counterflow.png")
+    plt.close(fig)
 
 
 # ------------------------------------------------------------------------------ speed
@@ -744,28 +886,45 @@ def _text(out):
         ]
     if out["safety"]:
         lines += ["", f"safety: {out['safety']}"]
+    if "counterflow_left" in out:
+        lines += [
+            "",
+            f"| counter-flow, left after {out['counterflow_seconds']:.0f} s | share |",
+            "|---|---|",
+            *(f"| {k} | {v} |" for k, v in out["counterflow_left"].items()),
+        ]
     if "plaza_seconds" in out:
         lines += [
             "",
             f"plaza: {out['plaza_seconds']} s simulated, {out['plaza_agents_with_an_end']} "
             "agents with an end (stuck: farther than the reach from it at the end)",
+            "",
+            "| plaza model | arrival ÷ free time p50 | p90 |",
+            "|---|---|---|",
+            *(f"| {m} | {r['p50']} | {r['p90']} |" for m, r in out["plaza_arrival_ratio"].items()),
         ]
     return "\n".join(lines)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sections", default="bottleneck,entrance,fd,plaza,speed")
+    ap.add_argument("--sections", default="bottleneck,counterflow,entrance,fd,plaza,speed")
     ap.add_argument("--hermes", type=Path, default=DATA / "hermes_uo")
     ap.add_argument("--widths", default="0.8,1.2,1.6,2.0,2.4")
     ap.add_argument("--sizes", default="1000,10000,50000,100000")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument(
+        "--model", default="collision-free-speed", choices=("collision-free-speed", "anticipation")
+    )
     ap.add_argument("--no-record", action="store_true")
     ap.add_argument("--cpu-devices", type=int, default=1, help="split jcrowd's speed runs")
     args = ap.parse_args()
     use_cpu_devices(args.cpu_devices)  # before JAX starts its backend
     sections = set(args.sections.split(","))
+    global MODEL
+    MODEL = args.model
     out: dict = {
+        "model": MODEL,
         "safety": {},
         "machine": machine(),
         "jax": jax.__version__,
@@ -778,16 +937,20 @@ def main() -> None:
         entrance(out)
     if "fd" in sections:
         fd(args.hermes, out)
+    if "counterflow" in sections:
+        counterflow(out)
     if "plaza" in sections:
-        plaza(out)
+        for model in ("anticipation", "collision-free-speed"):
+            plaza(out, model)
     if "speed" in sections:
         speed([int(n) for n in args.sizes.split(",")], out)
         speed([int(n) for n in args.sizes.split(",")], out, pillars=False)
     details = (
         f"{out['machine']}, jax {out['jax']}, JuPedSim {out['jupedsim']}, dt 1/30 s, "
-        f"sections {args.sections}, cpu × {jax.device_count()}"
+        f"sections {args.sections}, model {MODEL}, cpu × {jax.device_count()}"
     )
-    plot(out)
+    if MODEL == "collision-free-speed":  # the plots show the model JuPedSim runs too
+        plot(out)
     report("pedestrians", details, out, _text(out), args.json, not args.no_record)
 
 

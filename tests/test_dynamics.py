@@ -20,7 +20,7 @@ def _bottleneck(width: float):
     return shapely.union(room, corridor), shapely.box(3.0 - width / 2, 8.5, 3.0 + width / 2, 9.0)
 
 
-def _peds(pos, speed=1.34):
+def _peds(pos, speed=1.34, anticipate=False):
     n = len(pos)
     return Pedestrians(
         jnp.asarray(pos, jnp.float32),
@@ -28,6 +28,7 @@ def _peds(pos, speed=1.34):
         jnp.full(n, speed, jnp.float32),
         jnp.full(n, 0.2, jnp.float32),
         jnp.ones(n, bool),
+        jnp.zeros((n, 2), jnp.float32) if anticipate else None,
     )
 
 
@@ -39,12 +40,13 @@ def _grid_positions(n, lo, hi, spacing, seed=0):
     return pts[rng.choice(len(pts), n, replace=False)] + rng.uniform(-0.05, 0.05, (n, 2))
 
 
-def test_a_bottleneck_empties_safely():
+@pytest.mark.parametrize("anticipate", [False, True], ids=["plain", "anticipating"])
+def test_a_bottleneck_empties_safely(anticipate):
     """40 agents leave a 6 m room through a 1 m corridor: all leave, no NaN, nobody inside a
     wall, no two closer than 0.9 of their summed radii (the model is collision-free)."""
     area, exit_ = _bottleneck(1.0)
     world = build_world(area, [exit_])
-    peds = _peds(_grid_positions(40, (0.5, 0.5), (5.5, 5.0), 0.6))
+    peds = _peds(_grid_positions(40, (0.5, 0.5), (5.5, 5.0), 0.6), anticipate=anticipate)
     step = jax.jit(pedestrian_step)
     params = AvoidanceParams()
     inside = shapely.buffer(area, 0.01)
@@ -136,7 +138,7 @@ pts = np.stack(np.meshgrid(xs, np.arange(0.5, 5.0, 0.6)), -1).reshape(-1, 2)[:40
 n = len(pts)
 peds = Pedestrians(jnp.asarray(pts, jnp.float32), jnp.zeros(n, jnp.int32),
                    jnp.full(n, 1.34, jnp.float32), jnp.full(n, 0.2, jnp.float32),
-                   jnp.ones(n, bool))
+                   jnp.ones(n, bool), VELOCITY)
 step = split_pedestrian_step()
 left = []
 for _ in range(200):
@@ -149,11 +151,16 @@ print(json.dumps({"pos": np.asarray(peds.position).tolist(),
 
 
 @pytest.mark.slow
-def test_split_over_two_devices_equals_one_device():
-    """split_pedestrian_step on 2 devices (blocks of 20, neighbours through the all-gather)
-    equals it on 1 device: same agents out at the same steps, positions to 1e-4 m after 200
-    steps of a jammed bottleneck (float32 sums in another order, grown over the steps)."""
-    out = {k: run_on_devices(SPLIT_SCRIPT, k) for k in (1, 2)}
+@pytest.mark.parametrize(
+    "velocity", ["None", "jnp.zeros((n, 2), jnp.float32)"], ids=["plain", "anticipating"]
+)
+def test_split_over_two_devices_equals_one_device(velocity):
+    """split_pedestrian_step on 2 devices (blocks of 20, neighbours — and, anticipating, their
+    velocities — through the all-gather) equals it on 1 device: same agents out at the same
+    steps, positions to 1e-4 m after 200 steps of a jammed bottleneck (float32 sums in another
+    order, grown over the steps)."""
+    script = SPLIT_SCRIPT.replace("VELOCITY", velocity)
+    out = {k: run_on_devices(script, k) for k in (1, 2)}
     assert out[1]["devices"] == 1 and out[2]["devices"] == 2
     assert out[2]["left"] == out[1]["left"] and sum(out[1]["left"]) > 0
     assert out[2]["alive"] == out[1]["alive"]

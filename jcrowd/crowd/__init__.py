@@ -8,6 +8,7 @@ contract checked in CI).
 
 from jcrowd.crowd.avoidance import CANDIDATE_TIERS as CANDIDATE_TIERS
 from jcrowd.crowd.avoidance import AvoidanceParams as AvoidanceParams
+from jcrowd.crowd.avoidance import Motion as Motion
 from jcrowd.crowd.avoidance import avoid as avoid
 from jcrowd.crowd.avoidance import avoid_in_grid as avoid_in_grid
 from jcrowd.crowd.avoidance import avoid_one as avoid_one

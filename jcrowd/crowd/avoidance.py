@@ -19,6 +19,36 @@ the normal from the wall's closest point at distance ``d``, and do not enter Eq.
 defaults are JuPedSim 1.4's (``a = 8``, ``D = 0.1`` m, ``a_w = 5``, ``D_w = 0.02`` m,
 ``T = 1`` s), so the two simulators can be compared parameter for parameter.
 
+**Anticipation** (optional, on in scenarios by default): the collision-free speed model lets
+counter-flowing groups jam head-on (each agent's repulsion points straight back at the agent
+it meets). The anticipation velocity model of Q. Xu, M. Chraibi, A. Seyfried, "Anticipation in
+a velocity-based model for pedestrian dynamics", Transportation Research Part C 133 (2021)
+103464 (arXiv:2107.00624), keeps the speed of Eqs. (2)–(3) and changes the direction in three
+phases — perception, prediction, strategy — and relaxes it with a reaction time. We read the
+phases as follows (the paper's validation is bidirectional flow and lane formation; the exact
+terms below are our reading, not a transcription):
+
+- *perception*: neighbour ``j`` counts with weight ``k_ij = max(0, e_i^0·(x_j − x_i)/‖x_j − x_i‖)``
+  (in front of the desired direction; behind: 0);
+- *prediction*: both keep their current velocities; ``s^a_ij`` is the smallest distance between
+  the two over the next ``t_a`` seconds (closest approach, clipped to ``[0, t_a]``), ``p_ij``
+  the separation ``x_i − x_j`` at that time;
+- *strategy*: step sideways, perpendicular to the desired direction, to the side ``i`` is
+  predicted to be on: ``e_i = u(e_i^{CSM} + Σ_j k_ij a_a exp((ℓ_ij − s^a_ij)/D_a)
+  tanh((p_ij·r_i + b)/w) r_i)`` with ``r_i`` the right of ``e_i^0`` (``y`` up) and ``b`` a
+  small bias to the right that breaks the tie of an exact head-on meeting (keep right), ``w``
+  the width over which the side turns smoothly;
+- *reaction*: ``e_i ← u(e_i^{prev} + (e_i − e_i^{prev}) min(1, Δt/τ))`` from the direction of
+  the last step's velocity (when faster than 5 cm/s), for the direction chosen among people;
+  the walls' repulsion is added after it and acts at once (relaxed with the rest, agents
+  pressed by a crowd slid into walls: 3 agent-steps inside one in a door test).
+
+Defaults ``t_a = 1`` s, ``a_a = 8``, ``D_a = 0.1`` m, ``τ = 0.3`` s (JuPedSim 1.4's AVM
+defaults), ``b = 0.05`` m, ``w = 0.1`` m. Measured on two groups of 230 walking head-on (20 m
+fronts, 1.4 /m²): 45 s after the start 60 % had walked clear past the other group, against 32 %
+with the plain model; the prediction without the reaction time did worse than the plain model
+(docs/crowd.md).
+
 Smoothness: the direction (Eq. 4) is smooth in positions and parameters; the speed is
 piecewise linear in the spacing and the spacing a minimum over a set decided by the direction
 (Eq. 3), so its gradient jumps where the nearest neighbour ahead changes.
@@ -45,6 +75,7 @@ __all__ = [
     "BUCKET_DIVISORS",
     "CANDIDATE_TIERS",
     "AvoidanceParams",
+    "Motion",
     "avoid",
     "avoid_in_grid",
     "avoid_one",
@@ -60,6 +91,7 @@ BUCKET_DIVISORS = (64, 8)
 """The agents moving on to a tier are evaluated in the smallest bucket of ``N / d`` agents
 (at least 64) that holds them all, else all ``N`` agents are (one branch runs)."""
 
+_WALKING = 0.3  # m/s: a neighbour slower than this counts as partly standing (anticipation)
 _TINY = 1e-6  # m: distances below this count as coincident (direction left undefined → 0)
 
 
@@ -72,6 +104,11 @@ class AvoidanceParams(eqx.Module):
         wall_strength: ``a_w`` of the wall repulsion.
         wall_range: ``D_w`` of the wall repulsion (m).
         time_gap: ``T`` (s).
+        anticipation_time: ``t_a`` (s), how far ahead neighbours' paths are predicted.
+        anticipation_strength, anticipation_range: ``a_a``, ``D_a`` (m) of the sideways step.
+        reaction_time: ``τ`` (s) over which the direction follows.
+        keep_right: ``b`` (m), the tie-break of an exact head-on meeting.
+        side_width: ``w`` (m).
     """
 
     strength: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.0)
@@ -79,6 +116,22 @@ class AvoidanceParams(eqx.Module):
     wall_strength: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=5.0)
     wall_range: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.02)
     time_gap: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1.0)
+    anticipation_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1.0)
+    anticipation_strength: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.0)
+    anticipation_range: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
+    reaction_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.3)
+    keep_right: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.05)
+    side_width: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
+
+
+class Motion(eqx.Module):
+    """What anticipation reads (:func:`avoid`): the agents' own velocities of the last step
+    ``(n, 2)``, the crowd's ``(P, 2)`` in the rows neighbour ids index (the same array when
+    the agents are the crowd), and the step ``dt`` (s)."""
+
+    own: Float[Array, "n 2"]
+    crowd: Float[Array, "P 2"]
+    dt: Float[Array, ""] = eqx.field(converter=jnp.asarray)
 
 
 def closest_on_segments(
@@ -147,8 +200,10 @@ def avoid(
     walls: Float[Array, "S 2 2"],
     wall_ids: Int[Array, "N W"],
     others: tuple[Array, Array] | None = None,
+    motion: Motion | None = None,
 ) -> tuple[Float[Array, "N 2"], Float[Array, " N"]]:
-    """Every agent's velocity (Eqs. 1–4) from its candidate neighbours and walls.
+    """Every agent's velocity (Eqs. 1–4) from its candidate neighbours and walls; with
+    ``motion``, anticipating (the module docstring's reading of Xu et al. 2021).
 
     ``neighbours`` holds agent ids (``N`` for none), ``wall_ids`` segment ids into ``walls``
     (``S`` for none). With ``others = (positions (P, 2), radii (P,))`` the ids index those
@@ -173,6 +228,10 @@ def avoid(
     push = jnp.where(valid, params.strength * jnp.exp((size - dist) / params.range), 0.0) * inv
     ex = desired[:, 0] + jnp.sum(push * dx, axis=1)
     ez = desired[:, 1] + jnp.sum(push * dz, axis=1)
+    if motion is not None:
+        sx, sz = _sideways(params, desired, motion, neighbours, valid, dx, dz, inv, size)
+        # The reaction time relaxes the direction people choose; walls act at once.
+        ex, ez = _react(params, motion, *_unit_xz(ex + sx, ez + sz))
     pad = jnp.concatenate([walls, jnp.zeros((1, 2, 2), walls.dtype)])
     ax, az = pad[:, 0, 0][wall_ids], pad[:, 0, 1][wall_ids]
     bx, bz = pad[:, 1, 0][wall_ids], pad[:, 1, 1][wall_ids]
@@ -188,16 +247,69 @@ def avoid(
     wpush = jnp.where(wall_ids < s, wpush, 0.0) * winv
     ex = ex + jnp.sum(wpush * wx, axis=1)
     ez = ez + jnp.sum(wpush * wz, axis=1)
-    norm = jnp.sqrt(ex * ex + ez * ez)
-    ok = norm > _TINY
-    ex = jnp.where(ok, ex / jnp.maximum(norm, _TINY), 0.0)
-    ez = jnp.where(ok, ez / jnp.maximum(norm, _TINY), 0.0)
+    ex, ez = _unit_xz(ex, ez)
     # Neighbour j relative to i is (−dx, −dz): ahead when e·(x_j − x_i) ≥ 0.
     ahead = -(dx * ex[:, None] + dz * ez[:, None]) >= 0.0
     lateral = jnp.abs(dx * ez[:, None] - dz * ex[:, None])
     gap = jnp.min(jnp.where(valid & ahead & (lateral <= size), dist - size, jnp.inf), axis=1)
     v = jnp.minimum(speed, jnp.maximum(0.0, gap / params.time_gap))
     return jnp.stack([v * ex, v * ez], axis=1), gap
+
+
+def _sideways(
+    params: AvoidanceParams,
+    desired: Array,
+    motion: Motion,
+    neighbours: Array,
+    valid: Array,
+    dx: Array,
+    dz: Array,
+    inv: Array,
+    size: Array,
+) -> tuple[Array, Array]:
+    """The anticipatory sideways step ``Σ_j k_ij a_a e^{(ℓ_ij − s^a_ij)/D_a} tanh(…) r_i``
+    (module docstring) on ``(N, M)`` arrays; ``dx, dz`` are ``x_i − x_j``."""
+    crowd = jnp.concatenate([motion.crowd, jnp.zeros((1, 2), motion.crowd.dtype)])
+    wx = motion.own[:, 0:1] - crowd[:, 0][neighbours]  # v_i − v_j
+    wz = motion.own[:, 1:2] - crowd[:, 1][neighbours]
+    w2 = wx * wx + wz * wz
+    closing = -(dx * wx + dz * wz)
+    t = jnp.clip(closing / jnp.maximum(w2, _TINY**2), 0.0, params.anticipation_time)
+    px, pz = dx + wx * t, dz + wz * t  # x_i − x_j at the closest approach
+    s = jnp.sqrt(px * px + pz * pz)
+    d0x, d0z = desired[:, 0:1], desired[:, 1:2]
+    rx, rz = -d0z, d0x  # the right of the desired direction (y up)
+    front = jnp.maximum(0.0, -(dx * d0x + dz * d0z) * inv)  # k_ij
+    # Following: a neighbour walking my way, or standing, is followed, not stepped around.
+    vjx, vjz = crowd[:, 0][neighbours], crowd[:, 1][neighbours]
+    vj = jnp.sqrt(vjx * vjx + vjz * vjz)
+    against = (vj - (vjx * d0x + vjz * d0z)) / (2 * jnp.maximum(vj, _TINY))
+    front = front * against * jnp.minimum(1.0, vj / _WALKING)
+    strength = params.anticipation_strength * jnp.exp((size - s) / params.anticipation_range)
+    side = jnp.tanh((px * rx + pz * rz + params.keep_right) / params.side_width)
+    k = jnp.sum(jnp.where(valid, front * strength * side, 0.0), axis=1, keepdims=True)
+    return (k * rx)[:, 0], (k * rz)[:, 0]
+
+
+def _react(params: AvoidanceParams, motion: Motion, ex: Array, ez: Array) -> tuple[Array, Array]:
+    """The direction relaxed from the last step's: ``u(e' + (e − e') min(1, Δt/τ))``."""
+    vx, vz = motion.own[:, 0], motion.own[:, 1]
+    sp = jnp.sqrt(vx * vx + vz * vz)
+    moving = sp > 0.05
+    px = jnp.where(moving, vx / jnp.maximum(sp, _TINY), ex)
+    pz = jnp.where(moving, vz / jnp.maximum(sp, _TINY), ez)
+    rate = jnp.minimum(1.0, motion.dt / params.reaction_time)
+    return _unit_xz(px + (ex - px) * rate, pz + (ez - pz) * rate)
+
+
+def _unit_xz(ex: Array, ez: Array) -> tuple[Array, Array]:
+    """``(ex, ez)`` scaled to unit length, 0 where it is shorter than ``_TINY``."""
+    norm = jnp.sqrt(ex * ex + ez * ez)
+    ok = norm > _TINY
+    return (
+        jnp.where(ok, ex / jnp.maximum(norm, _TINY), 0.0),
+        jnp.where(ok, ez / jnp.maximum(norm, _TINY), 0.0),
+    )
 
 
 def avoid_in_grid(
@@ -213,9 +325,11 @@ def avoid_in_grid(
     rows: Int[Array, " n"],
     walls: Float[Array, "S 2 2"],
     wall_ids: Int[Array, "n W"],
+    motion: Motion | None = None,
 ) -> Float[Array, "n 2"]:
     """:func:`avoid` for agents whose neighbours are the crowd in ``cells``, reading only as
-    many candidates as each agent has. Agents not alive get velocity 0.
+    many candidates as each agent has. Agents not alive get velocity 0. With ``motion``
+    (``crowd`` in the rows of ``others``) the agents anticipate.
 
     ``others = (positions (P, 2), radii (P,))`` is the crowd ``cells`` was filled from and
     ``rows`` the agents' own ids in it (they are not their own neighbours). The crowd is read
@@ -233,8 +347,11 @@ def avoid_in_grid(
     pos_c = jnp.concatenate([pos, jnp.zeros((1, 2), pos.dtype)])[order]  # cell order
     rad_c = jnp.concatenate([rad, jnp.zeros((1,), rad.dtype)])[order]
     own = cells.place[rows]
+    if motion is not None:
+        vel_c = jnp.concatenate([motion.crowd, jnp.zeros((1, 2), motion.crowd.dtype)])[order]
 
     def velocities(sel: Array, near: Array) -> Array:
+        moving = None if motion is None else Motion(motion.own[sel], vel_c, motion.dt)
         v, _ = avoid(
             params,
             position[sel],
@@ -245,6 +362,7 @@ def avoid_in_grid(
             walls,
             wall_ids[sel],
             others=(pos_c, rad_c),
+            motion=moving,
         )
         return v
 

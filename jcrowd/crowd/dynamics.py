@@ -24,7 +24,7 @@ import numpy as np
 import shapely
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.avoidance import AvoidanceParams, avoid_in_grid
+from jcrowd.crowd.avoidance import AvoidanceParams, Motion, avoid_in_grid
 from jcrowd.crowd.blocking import OneStepAtATime
 from jcrowd.crowd.navigation import (
     Navigation,
@@ -81,6 +81,9 @@ class Pedestrians(eqx.Module):
         speed: ``(N,)`` free walking speed ``v0`` (m/s).
         radius: ``(N,)`` m.
         alive: ``(N,)``.
+        velocity: ``(N, 2)`` the last step's velocity (m/s); with it agents anticipate
+            (:mod:`jcrowd.crowd.avoidance`), without it (``None``) the plain collision-free
+            speed model steps them.
     """
 
     position: Float[Array, "N 2"]
@@ -88,6 +91,7 @@ class Pedestrians(eqx.Module):
     speed: Float[Array, " N"]
     radius: Float[Array, " N"]
     alive: Bool[Array, " N"]
+    velocity: Float[Array, "N 2"] | None = None
 
 
 class StepInfo(eqx.Module):
@@ -114,12 +118,15 @@ def pedestrian_step(
     ``(N, c)``, ``ids`` are the block's rows in it.
     """
     desired = desired_directions(world.nav, peds.target, peds.position)
-    mine = jnp.concatenate(
-        [peds.position, peds.radius[:, None], peds.alive[:, None].astype(peds.radius.dtype)],
-        axis=1,
-    )
+    columns = [peds.position, peds.radius[:, None], peds.alive[:, None].astype(peds.radius.dtype)]
+    if peds.velocity is not None:
+        columns.append(peds.velocity)
+    mine = jnp.concatenate(columns, axis=1)
     every = mine if gather is None else gather(mine)
     pos, rad, live = every[:, :2], every[:, 2], every[:, 3] > 0.5
+    motion = (
+        None if peds.velocity is None else Motion(peds.velocity, every[:, 4:6], jnp.asarray(dt))
+    )
     rows = jnp.arange(peds.position.shape[0], dtype=jnp.int32) if ids is None else ids
     cells = cell_list(world.grid, pos, live)
     velocity = avoid_in_grid(
@@ -135,14 +142,16 @@ def pedestrian_step(
         rows,
         world.walls,
         world.cell_walls[cell_index(world.grid, peds.position)],
+        motion,
     )
     position = peds.position + velocity * dt
     depth = field_values(world.nav, peds.target, position[:, 0], position[:, 1])
     arrived = peds.alive & (depth <= world.exit_depth)
     info = StepInfo(velocity, arrived, cells.overflow)
-    return eqx.tree_at(
-        lambda p: (p.position, p.alive), peds, (position, peds.alive & ~arrived)
-    ), info
+    moved = eqx.tree_at(lambda p: (p.position, p.alive), peds, (position, peds.alive & ~arrived))
+    if peds.velocity is not None:
+        moved = eqx.tree_at(lambda p: p.velocity, moved, velocity)
+    return moved, info
 
 
 def split_pedestrian_step(devices: Sequence[Any] | None = None) -> Any:
@@ -151,7 +160,8 @@ def split_pedestrian_step(devices: Sequence[Any] | None = None) -> Any:
 
     ``(params, world, peds, dt) → (peds, info)`` as the plain step, compiled. Each device steps
     its own block; neighbours live on every device, so each all-gathers the crowd's positions,
-    radii and alive flags (16 bytes per agent) and fills the whole grid. The call returns once
+    radii and alive flags (16 bytes per agent; 24 with velocities, when agents anticipate) and
+    fills the whole grid. The call returns once
     every device is done (:class:`~jcrowd.crowd.blocking.OneStepAtATime`).
     """
     import jax

@@ -397,6 +397,7 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         avoid=scenario.dynamics.avoid,
         grid=_neighbour_grid(scenario) if scenario.dynamics.avoid else None,
         far_every=scenario.dynamics.far_every,
+        anticipate=scenario.dynamics.model == "anticipation",
     )
     config.check(levels)
     scene = None

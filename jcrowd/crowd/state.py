@@ -60,6 +60,9 @@ class StepConfig:
         far_every: simulation level of detail: agents drawn coarser than ``blend_max_level``
             (or not drawn) compute their avoidance every ``far_every`` steps, in turn, and
             walk on at their last velocity in between (1: everyone every step).
+        anticipate: with ``avoid``, agents anticipate each other's paths (the anticipation
+            velocity model's reading in :mod:`jcrowd.crowd.avoidance`); off: the plain
+            collision-free speed model.
     """
 
     capacities: tuple[int, ...]
@@ -77,6 +80,7 @@ class StepConfig:
     avoid: bool = False
     grid: GridSpec | None = None
     far_every: int = 1
+    anticipate: bool = True
 
     def check(self, levels: int) -> None:
         """Raise :class:`JcrowdError` unless the settings fit a model with ``levels`` levels."""

@@ -1,7 +1,8 @@
 """The crowd step's dynamics stage: where each agent walks, avoiding the others (DESIGN §5b).
 
 With :attr:`~jcrowd.crowd.state.StepConfig.avoid` on, the simulation is the authority on
-where people are: each alive agent's velocity comes from the collision-free speed model
+where people are: each alive agent's velocity comes from the collision-free speed model,
+anticipating with :attr:`~jcrowd.crowd.state.StepConfig.anticipate`
 (:mod:`jcrowd.crowd.avoidance`) — its desired direction straight towards its current waypoint
 (or, with a layout, down the waypoint's navigation field: :mod:`jcrowd.crowd.scene`; the
 scene's walls then repel too), its free speed, and its neighbours from the cell grid
@@ -12,7 +13,8 @@ clips follow the simulated path.
 
 With the crowd split over devices each device steps its own block of agents, but neighbours
 live on every device: ``gather`` assembles the whole crowd's positions, radii and alive flags
-(an all-gather of ``(N, 4)`` floats: 16 MB at 1M agents) and every device fills the same grid
+(an all-gather of ``(N, 4)`` floats: 16 MB at 1M agents; ``(N, 6)``, 24 MB, when agents
+anticipate: their velocities too) and every device fills the same grid
 from them. ``ids`` are the block's agents' rows in the gathered arrays.
 """
 
@@ -23,7 +25,7 @@ from collections.abc import Callable
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.avoidance import AvoidanceParams, avoid_in_grid
+from jcrowd.crowd.avoidance import AvoidanceParams, Motion, avoid_in_grid
 from jcrowd.crowd.navigation import desired_directions, field_values
 from jcrowd.crowd.neighbours import GridSpec, cell_index, cell_list
 from jcrowd.crowd.scene import Scene
@@ -81,6 +83,8 @@ def steer(
     field: Array | None = None,
     due: Array | None = None,
     previous: tuple[Array, Array] | None = None,
+    anticipate: bool = False,
+    dt: Array | float = 1 / 30,
 ) -> tuple[Array, Array, Array]:
     """Velocity ``(vx, vz)`` (m/s) of each agent walking to ``(tx, tz)``, and the grid overflow.
 
@@ -93,20 +97,29 @@ def steer(
     ``due`` (simulation level of detail): the rows whose velocity is computed this step, a
     fixed-size index array (``n`` pads it); the others keep their ``previous`` velocity
     ``(vx, vz)``. Every agent is still everyone's neighbour at its current position.
+
+    ``anticipate``: agents predict their neighbours' paths from the ``previous`` velocities
+    (which the gather then also carries: 24 bytes per agent instead of 16) and relax their
+    direction over the reaction time at steps of ``dt`` s (:mod:`jcrowd.crowd.avoidance`).
     """
     n = x.shape[0]
-    mine = jnp.stack([x, z, radius, alive.astype(x.dtype)], axis=1)
+    px, pz = (jnp.zeros(n, x.dtype), jnp.zeros(n, x.dtype)) if previous is None else previous
+    columns = [x, z, radius, alive.astype(x.dtype)] + ([px, pz] if anticipate else [])
+    mine = jnp.stack(columns, axis=1)
     every = mine if gather is None else gather(mine)
     pos, rad, live = every[:, :2], every[:, 2], every[:, 3] > 0.5
     rows = jnp.arange(n, dtype=jnp.int32) if ids is None else ids
     cells = cell_list(grid, pos, live)
+    own = jnp.stack([px, pz], axis=1)
     if due is not None:
         sel = jnp.where(due < n, due, 0)
         in_sel = alive[sel] & (due < n)
         x, z, tx, tz, speed, radius, rows = (a[sel] for a in (x, z, tx, tz, speed, radius, rows))
         field = None if field is None else field[sel]
+        own = own[sel]
     else:
         in_sel = alive
+    motion = Motion(own, every[:, 4:6], jnp.asarray(dt, x.dtype)) if anticipate else None
     dx, dz = tx - x, tz - z
     norm = jnp.sqrt(dx * dx + dz * dz)
     desired = jnp.stack([dx, dz], axis=1) / jnp.maximum(norm, 1e-6)[:, None]
@@ -134,10 +147,10 @@ def steer(
         rows,
         walls,
         wall_ids,
+        motion,
     )
     vx, vz = velocity[:, 0], velocity[:, 1]
     if due is not None:
-        px, pz = (jnp.zeros(n, x.dtype), jnp.zeros(n, x.dtype)) if previous is None else previous
         vx = jnp.where(alive, px.at[due].set(vx, mode="drop"), 0.0)
         vz = jnp.where(alive, pz.at[due].set(vz, mode="drop"), 0.0)
     return vx, vz, cells.overflow

@@ -307,6 +307,8 @@ def step(
             None if scene is None else current_field(state),
             due,
             (state.vx, state.vz),
+            config.anticipate,
+            dt,
         )
         dx, dz = vx * dt, vz * dt
         heading = turn_towards(state.heading, vx, vz, dt)

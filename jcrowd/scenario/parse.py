@@ -244,7 +244,9 @@ def parse_scenario(
         dynamics=r.build(
             "dynamics",
             DynamicsSettings,
-            **r.table(doc.get("dynamics", {}), "dynamics", ("avoid", "radius", "far_every")),
+            **r.table(
+                doc.get("dynamics", {}), "dynamics", ("avoid", "model", "radius", "far_every")
+            ),
         ),
         sources=r.sources(doc),
     )

@@ -288,20 +288,34 @@ each) starts to fail near 0.4: measured, 3 touching pairs among 320 agents of ra
 default radius, 6.3 at the entrance experiment's 0.13 m."""
 
 
+DYNAMICS_MODELS = ("anticipation", "collision-free-speed")
+"""The values of ``[dynamics] model``."""
+
+
 @dataclass(frozen=True, eq=False)
 class DynamicsSettings:
     """Crowd dynamics (``[dynamics]``). ``avoid``: agents avoid each other (the collision-free
     speed model drives every root; off: each walks its clips towards its waypoints as if alone).
-    ``radius``: the body disc kept clear around each agent (m, 0.1–0.4). ``far_every``:
-    agents drawn coarser than the blended near levels, or not drawn, compute their avoidance
-    every ``far_every`` steps, in turn (1–8; 1: every agent every step)."""
+    ``model``: ``"anticipation"`` (people predict each other's paths a second ahead and step
+    aside early: counter-flows pass) or ``"collision-free-speed"`` (the plain model; see
+    :mod:`jcrowd.crowd.avoidance`). ``radius``: the body disc kept clear around each agent (m,
+    0.1–0.4). ``far_every``: agents drawn coarser than the blended near levels, or not drawn,
+    compute their avoidance every ``far_every`` steps, in turn (1–8; 1: every agent every
+    step)."""
 
     avoid: bool = False
+    model: str = "anticipation"
     radius: float = 0.2
     far_every: int = 1
 
     def __post_init__(self) -> None:
         require(isinstance(self.avoid, bool), "avoid", "true or false", self.avoid)
+        require(
+            self.model in DYNAMICS_MODELS,
+            "model",
+            " or ".join(repr(m) for m in DYNAMICS_MODELS),
+            self.model,
+        )
         r = self.radius
         require(real(r) and 0.1 <= r <= 0.4, "radius", "a radius in [0.1, 0.4] (m)", r)
         object.__setattr__(self, "radius", float(r))
