@@ -32,8 +32,8 @@ devices (each decodes its share of the agents); the naive baseline is one progra
 parallelizes over the cores inside each kernel.
 
 With ``--avoid`` the plaza has ``[dynamics] avoid = true``: every agent's root is moved by the
-collision-free speed model among its neighbours (:mod:`jcrowd.crowd.steering`) — the whole step
-with crowd dynamics; the row says so.
+avoidance model (``--model``, default ``anticipation``) among its neighbours
+(:mod:`jcrowd.crowd.steering`) — the whole step with crowd dynamics; the row says so.
 
 ``python bench/step.py [--agents 1000,100000] [--cpu-devices K] [--avoid] [--json]``; appends a
 row to bench/RESULTS.md.
@@ -218,11 +218,12 @@ def run_count(
     min_pixels: float | None = None,
     avoid: bool = False,
     far_every: int = 1,
+    dynamics_model: str = "anticipation",
 ) -> dict[str, Any]:
     side = float(np.sqrt(10.0 * n))
     text = PLAZA.format(side=side + 2, inner=side, eye_z=-side / 2 - 0.5, n=n)
     if avoid:
-        text += f"\n[dynamics]\navoid = true\nfar_every = {far_every}\n"
+        text += f'\n[dynamics]\navoid = true\nfar_every = {far_every}\nmodel = "{dynamics_model}"\n'
     sim, state = prepare(parse_scenario(text, "bench-plaza.toml"), model)
     state = shard_state(state)  # one block of agents per device (unchanged on one device)
     if min_pixels is not None:  # every agent in view synthesized: no dots at all
@@ -295,6 +296,12 @@ def main() -> None:
     ap.add_argument(
         "--far-every", type=int, default=1, help="with --avoid: [dynamics] far_every (sim LOD)"
     )
+    ap.add_argument(
+        "--model",
+        default="anticipation",
+        choices=("anticipation", "collision-free-speed"),
+        help="with --avoid: [dynamics] model",
+    )
     args = ap.parse_args()
     use_cpu_devices(args.cpu_devices)  # before JAX starts its backend
     counts = [int(v) for v in args.agents.split(",")]
@@ -304,7 +311,8 @@ def main() -> None:
     full_rate = 0.0
     for n in counts:
         steps = args.steps if n < 1_000_000 else max(3, args.steps // 4)
-        row = run_count(model, n, steps, bw, avoid=args.avoid, far_every=args.far_every)
+        opts = {"avoid": args.avoid, "far_every": args.far_every, "dynamics_model": args.model}
+        row = run_count(model, n, steps, bw, **opts)
         sim, state = row.pop("_sim")
         naive[str(n)] = naive_ms(model, n, 3)
         speedup[str(n)] = naive[str(n)] / row["ms_per_step"]
@@ -313,9 +321,7 @@ def main() -> None:
         rows.append(row)
         print(f"{n:,} agents: {row['ms_per_step']:.1f} ms/step", file=sys.stderr)
         if n == 100_000:  # the same plaza with every agent in view synthesized
-            every = run_count(
-                model, n, steps, bw, min_pixels=0.0, avoid=args.avoid, far_every=args.far_every
-            )
+            every = run_count(model, n, steps, bw, min_pixels=0.0, **opts)
             every.pop("_sim")
             rows.append(every)
     out = {
@@ -330,6 +336,7 @@ def main() -> None:
         "devices": len(jax.devices()),
         "avoid": args.avoid,
         "far_every": args.far_every,
+        "dynamics_model": args.model if args.avoid else None,
         "machine": machine(),
         "jax": jax.__version__,
     }
@@ -337,7 +344,7 @@ def main() -> None:
     report(
         "step",
         f"{out['machine']}, jax {out['jax']}, {out['device']} × {out['devices']}"
-        + (", avoidance on" if args.avoid else "")
+        + (f", avoidance on ({args.model})" if args.avoid else "")
         + (f", far agents every {args.far_every} steps" if args.far_every > 1 else ""),
         out,
         text,

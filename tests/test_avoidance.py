@@ -274,7 +274,7 @@ def _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt):
     """The anticipating velocities as the avoidance module's docstring reads Xu, Chraibi &
     Seyfried (2021), float64 loops: the closest approach found by sampling the horizon finely
     (not the closed form), the side and weights written out per pair, then the reaction time,
-    the walls and the speed of Eqs. (2)–(3)."""
+    the overlap, the walls and the speed of Eqs. (2)–(3)."""
     n = len(pos)
     vel_out, gaps = np.zeros((n, 2)), np.full(n, np.inf)
     times = np.linspace(0.0, TA, 200001)
@@ -302,6 +302,11 @@ def _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt):
         prev = vel[i] / sp if sp > 0.05 else e
         e = prev + (e - prev) * min(1.0, dt / TAU)
         e /= np.hypot(*e)
+        for j in range(n):  # overlapping bodies: the repulsion beyond contact acts at once
+            d = pos[i] - pos[j]
+            s = np.hypot(*d)
+            if j != i and s < radius[i] + radius[j]:
+                e += (A * np.exp((radius[i] + radius[j] - s) / D) - A) * d / s
         for a, b in walls:
             t = np.clip(np.dot(pos[i] - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
             d = pos[i] - (a + t * (b - a))
@@ -346,6 +351,31 @@ def test_anticipating_velocities_equal_the_reading(seed):
     plain, _ = avoid(AvoidanceParams(), *f32[:4], cand, f32[4], wall_ids)
     # Premise: anticipation changes these scenes (by more than the tolerance, many times over).
     assert np.abs(np.asarray(plain) - want_v).max() > 1e-2
+
+
+def test_anticipating_overlapping_bodies_equal_the_reading():
+    """Eight agents dropped at random in 1.2 m × 1.2 m (bodies overlap): the repulsion beyond
+    its value at contact acts without the reaction time. Same oracle and tolerance."""
+    rng = np.random.default_rng(3)
+    pos = rng.uniform(-0.6, 0.6, (8, 2))
+    ang = rng.uniform(-np.pi, np.pi, 8)
+    desired = np.stack([np.cos(ang), np.sin(ang)], 1)
+    speed, radius = np.full(8, 1.3), np.full(8, 0.2)
+    d = np.linalg.norm(pos[:, None] - pos[None], axis=-1) + 9 * np.eye(8)
+    assert d.min() < 0.4  # premise: some bodies overlap
+    vel, walls = _velocities(8, 3), np.zeros((0, 2, 2))
+    want_v, _ = _oracle_anticipating(pos, desired, speed, radius, walls, vel, 1 / 30)
+    f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, vel)]
+    cand = jnp.asarray([[j for j in range(8) if j != i] for i in range(8)], jnp.int32)
+    got, _ = avoid(
+        AvoidanceParams(),
+        *f32[:4],
+        cand,
+        jnp.zeros((0, 2, 2)),
+        jnp.zeros((8, 1), jnp.int32),
+        motion=Motion(f32[4], f32[4], 1 / 30),
+    )
+    np.testing.assert_allclose(np.asarray(got), want_v, atol=1e-4)
 
 
 def test_two_people_meeting_head_on_both_keep_right():
@@ -433,3 +463,28 @@ def test_anticipating_grid_kernel_and_block_equal_avoid():
         motion=Motion(vel[ids], vel, 1 / 30),
     )
     np.testing.assert_allclose(np.asarray(block), np.asarray(want)[1::2], atol=1e-6)
+
+
+def test_a_time_per_agent_equals_each_agents_own_step():
+    """Far agents that update every k steps relax their direction by the k steps since their
+    last update: ``Motion.dt`` per agent gives each row what a scalar ``dt`` of that agent's
+    value gives (the relaxation's rate min(1, Δt/τ) reaches 1 at Δt = τ, so 0.1 s and 0.4 s
+    differ)."""
+    pos, desired, speed, radius, walls = _scene(10, 6, spread=2.0)
+    vel = _velocities(10, 6)
+    n = len(pos)
+    f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, walls, vel)]
+    cand = jnp.asarray([[j for j in range(n) if j != i] for i in range(n)], jnp.int32)
+    wall_ids = jnp.broadcast_to(jnp.arange(len(walls), dtype=jnp.int32), (n, len(walls)))
+    times = jnp.where(jnp.arange(n) % 2 == 0, 0.1, 0.4).astype(jnp.float32)
+
+    def run(dt):
+        v, _ = avoid(
+            AvoidanceParams(), *f32[:4], cand, f32[4], wall_ids, motion=Motion(f32[5], f32[5], dt)
+        )
+        return np.asarray(v)
+
+    got, short, long_ = run(times), run(0.1), run(0.4)
+    np.testing.assert_allclose(got[0::2], short[0::2], atol=1e-7)
+    np.testing.assert_allclose(got[1::2], long_[1::2], atol=1e-7)
+    assert np.abs(short - long_).max() > 1e-3  # premise: the time matters

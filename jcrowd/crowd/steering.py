@@ -100,7 +100,9 @@ def steer(
 
     ``anticipate``: agents predict their neighbours' paths from the ``previous`` velocities
     (which the gather then also carries: 24 bytes per agent instead of 16) and relax their
-    direction over the reaction time at steps of ``dt`` s (:mod:`jcrowd.crowd.avoidance`).
+    direction over the reaction time, by the ``dt`` s since their last update (a scalar, or
+    one per agent: far agents updating every k steps relax by k steps at a time;
+    :mod:`jcrowd.crowd.avoidance`).
     """
     n = x.shape[0]
     px, pz = (jnp.zeros(n, x.dtype), jnp.zeros(n, x.dtype)) if previous is None else previous
@@ -111,15 +113,16 @@ def steer(
     rows = jnp.arange(n, dtype=jnp.int32) if ids is None else ids
     cells = cell_list(grid, pos, live)
     own = jnp.stack([px, pz], axis=1)
+    elapsed = jnp.broadcast_to(jnp.asarray(dt, x.dtype), (n,))
     if due is not None:
         sel = jnp.where(due < n, due, 0)
         in_sel = alive[sel] & (due < n)
         x, z, tx, tz, speed, radius, rows = (a[sel] for a in (x, z, tx, tz, speed, radius, rows))
         field = None if field is None else field[sel]
-        own = own[sel]
+        own, elapsed = own[sel], elapsed[sel]
     else:
         in_sel = alive
-    motion = Motion(own, every[:, 4:6], jnp.asarray(dt, x.dtype)) if anticipate else None
+    motion = Motion(own, every[:, 4:6], elapsed) if anticipate else None
     dx, dz = tx - x, tz - z
     norm = jnp.sqrt(dx * dx + dz * dz)
     desired = jnp.stack([dx, dz], axis=1) / jnp.maximum(norm, 1e-6)[:, None]

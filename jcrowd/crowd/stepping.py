@@ -285,13 +285,14 @@ def step(
     if config.avoid:
         grid = cast(GridSpec, config.grid)  # StepConfig.check requires it with avoid
         tx, tz = waypoint_xz(state.waypoints, state.waypoint)
-        due = None
+        due, elapsed = None, dt
         if config.far_every > 1:  # simulation LOD: far agents in turn
             n = state.x.shape[0]
             near_slots = sum(config.capacities[: config.blend_max_level + 1])
             size = min(n, -(-n // config.far_every) + near_slots)
             drawn_near = buckets.level <= config.blend_max_level
             due = due_rows(drawn_near, state.clock, dt, config.far_every, size)
+            elapsed = jnp.where(drawn_near, dt, dt * config.far_every)  # since the last update
         vx, vz, crowding = steer(
             grid,
             state.x,
@@ -308,7 +309,7 @@ def step(
             due,
             (state.vx, state.vz),
             config.anticipate,
-            dt,
+            elapsed,
         )
         dx, dz = vx * dt, vz * dt
         heading = turn_towards(state.heading, vx, vz, dt)
