@@ -292,8 +292,8 @@ def _sideways(
     # Following: a neighbour walking my way, or standing, is followed, not stepped around.
     vjx, vjz = crowd[:, 0][neighbours], crowd[:, 1][neighbours]
     vj = jnp.sqrt(vjx * vjx + vjz * vjz)
-    against = (vj - (vjx * d0x + vjz * d0z)) / (2 * jnp.maximum(vj, _TINY))
-    front = front * against * jnp.minimum(1.0, vj / _WALKING)
+    # (1 − cos)/2 of the angle between v_j and e_i^0, times min(1, ‖v_j‖/_WALKING), in one.
+    front = front * (vj - (vjx * d0x + vjz * d0z)) / (2 * jnp.maximum(vj, _WALKING))
     strength = params.anticipation_strength * jnp.exp((size - s) / params.anticipation_range)
     side = jnp.tanh((px * rx + pz * rz + params.keep_right) / params.side_width)
     k = jnp.sum(jnp.where(valid, front * strength * side, 0.0), axis=1, keepdims=True)
