@@ -144,6 +144,28 @@ def test_far_agents_in_turn_keep_apart_without_recompiling():
     assert closest >= 0.9 * 0.4, closest
 
 
+@pytest.mark.parametrize("value", ['"social-force"', '"CSM"', "1"])
+def test_an_unknown_dynamics_model_is_an_error_naming_the_key(value):
+    text = PLAZA.replace("far_every = {every}", f"model = {value}").format()
+    with pytest.raises(
+        JcrowdError, match=r"dynamics.model: expected 'anticipation' or 'collision-free-speed'"
+    ):
+        parse_scenario(text, "plaza.toml")
+
+
+def test_the_dynamics_model_reaches_the_step():
+    """``model`` picks the step's avoidance: anticipation by default, the plain model on
+    request (the setting the compiled step reads)."""
+    from jcrowd import load_default_model
+    from jcrowd.crowd import prepare
+
+    model = load_default_model()
+    for line, want in (("", True), ('model = "collision-free-speed"', False)):
+        text = PLAZA.replace("far_every = {every}", line).format()
+        sim, _ = prepare(parse_scenario(text, "plaza.toml"), model)
+        assert sim.config.anticipate is want
+
+
 @pytest.mark.parametrize("value", ["0", "9", "true", "1.5"])
 def test_far_every_errors_name_the_key(value):
     text = PLAZA.replace("far_every = {every}", f"far_every = {value}").format()
