@@ -274,7 +274,7 @@ def _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt):
     """The anticipating velocities as the avoidance module's docstring reads Xu, Chraibi &
     Seyfried (2021), float64 loops: the closest approach found by sampling the horizon finely
     (not the closed form), the side and weights written out per pair, then the reaction time,
-    the overlap, the walls and the speed of Eqs. (2)–(3)."""
+    the walls and the speed of Eqs. (2)–(3)."""
     n = len(pos)
     vel_out, gaps = np.zeros((n, 2)), np.full(n, np.inf)
     times = np.linspace(0.0, TA, 200001)
@@ -302,11 +302,6 @@ def _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt):
         prev = vel[i] / sp if sp > 0.05 else e
         e = prev + (e - prev) * min(1.0, dt / TAU)
         e /= np.hypot(*e)
-        for j in range(n):  # overlapping bodies: the repulsion beyond contact acts at once
-            d = pos[i] - pos[j]
-            s = np.hypot(*d)
-            if j != i and s < radius[i] + radius[j]:
-                e += (A * np.exp((radius[i] + radius[j] - s) / D) - A) * d / s
         for a, b in walls:
             t = np.clip(np.dot(pos[i] - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
             d = pos[i] - (a + t * (b - a))
@@ -354,8 +349,8 @@ def test_anticipating_velocities_equal_the_reading(seed):
 
 
 def test_anticipating_overlapping_bodies_equal_the_reading():
-    """Eight agents dropped at random in 1.2 m × 1.2 m (bodies overlap): the repulsion beyond
-    its value at contact acts without the reaction time. Same oracle and tolerance."""
+    """Eight agents dropped at random in 1.2 m × 1.2 m (bodies overlap, repulsions far above
+    the desire): same oracle and tolerance."""
     rng = np.random.default_rng(3)
     pos = rng.uniform(-0.6, 0.6, (8, 2))
     ang = rng.uniform(-np.pi, np.pi, 8)

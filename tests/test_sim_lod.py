@@ -148,19 +148,19 @@ def test_far_agents_in_turn_keep_apart_without_recompiling():
 def test_an_unknown_dynamics_model_is_an_error_naming_the_key(value):
     text = PLAZA.replace("far_every = {every}", f"model = {value}").format()
     with pytest.raises(
-        JcrowdError, match=r"dynamics.model: expected 'anticipation' or 'collision-free-speed'"
+        JcrowdError, match=r"dynamics.model: expected 'collision-free-speed' or 'anticipation'"
     ):
         parse_scenario(text, "plaza.toml")
 
 
 def test_the_dynamics_model_reaches_the_step():
-    """``model`` picks the step's avoidance: anticipation by default, the plain model on
+    """``model`` picks the step's avoidance: the plain model by default, anticipation on
     request (the setting the compiled step reads)."""
     from jcrowd import load_default_model
     from jcrowd.crowd import prepare
 
     model = load_default_model()
-    for line, want in (("", True), ('model = "collision-free-speed"', False)):
+    for line, want in (("", False), ('model = "anticipation"', True)):
         text = PLAZA.replace("far_every = {every}", line).format()
         sim, _ = prepare(parse_scenario(text, "plaza.toml"), model)
         assert sim.config.anticipate is want

@@ -44,6 +44,7 @@ spawn = {{ shape = "rect", center = [0, 5], size = [5, 4] }}
 goal = {{ shape = "rect", center = [0, -17], size = [8, 3] }}
 [dynamics]
 avoid = {avoid}
+model = "{model}"
 """
 
 
@@ -72,11 +73,9 @@ def test_aim_point_extrapolates_the_velocity():
     np.testing.assert_allclose(np.asarray(got), [[2.0, 4.0], [1.1, 2.0]], atol=1e-6)
 
 
-def _run(avoid: bool, steps: int = 150):
-    sim, state = prepare(
-        parse_scenario(COUNTERFLOW.format(avoid="true" if avoid else "false"), "t.toml"),
-        load_default_model(),
-    )
+def _run(avoid: bool, steps: int = 150, model: str = "collision-free-speed"):
+    text = COUNTERFLOW.format(avoid="true" if avoid else "false", model=model)
+    sim, state = prepare(parse_scenario(text, "t.toml"), load_default_model())
     fn = sim.compiled(donate=False)
     closest, follow = np.inf, 0.0
     for i in range(steps):
@@ -93,8 +92,9 @@ def _run(avoid: bool, steps: int = 150):
     return closest, follow, int(frame.crowding), fn
 
 
-def test_avoiding_agents_keep_apart_and_the_root_follows_the_simulation():
-    closest, follow, crowding, fn = _run(True)
+@pytest.mark.parametrize("model", ["collision-free-speed", "anticipation"])
+def test_avoiding_agents_keep_apart_and_the_root_follows_the_simulation(model):
+    closest, follow, crowding, fn = _run(True, model=model)
     assert closest >= 0.9 * 0.4, closest  # two 0.2 m discs, as the dynamics bench's bar
     assert follow < 1e-5  # root += v·dt exactly (float32 of positions ~10 m)
     assert crowding == 0
@@ -133,12 +133,14 @@ SCRIPT = textwrap.dedent(
 
 
 @pytest.mark.slow
-def test_split_over_two_devices_equals_one_device():
-    """Neighbours on the other device are seen through the all-gather: same crowd to 1e-4 m
-    after 40 steps (float32; XLA may order a block's sums differently, and 40 steps of
-    avoidance let a 1e-6 difference grow). A pillar between the groups puts the scene's
-    navigation fields and walls (jcrowd.crowd.scene) under the split too."""
-    text = COUNTERFLOW.format(avoid="true") + PILLAR
+@pytest.mark.parametrize("model", ["collision-free-speed", "anticipation"])
+def test_split_over_two_devices_equals_one_device(model):
+    """Neighbours on the other device are seen through the all-gather (with anticipation,
+    their velocities too): same crowd to 1e-4 m after 40 steps (float32; XLA may order a
+    block's sums differently, and 40 steps of avoidance let a 1e-6 difference grow). A pillar
+    between the groups puts the scene's navigation fields and walls (jcrowd.crowd.scene) under
+    the split too."""
+    text = COUNTERFLOW.format(avoid="true", model=model) + PILLAR
     out = {k: run_on_devices(SCRIPT, k, text) for k in (1, 2)}
     np.testing.assert_allclose(out[2]["x"], out[1]["x"], atol=1e-4)
     np.testing.assert_allclose(out[2]["z"], out[1]["z"], atol=1e-4)

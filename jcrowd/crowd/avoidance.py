@@ -19,14 +19,14 @@ the normal from the wall's closest point at distance ``d``, and do not enter Eq.
 defaults are JuPedSim 1.4's (``a = 8``, ``D = 0.1`` m, ``a_w = 5``, ``D_w = 0.02`` m,
 ``T = 1`` s), so the two simulators can be compared parameter for parameter.
 
-**Anticipation** (optional, on in scenarios by default): the collision-free speed model lets
-counter-flowing groups jam head-on (each agent's repulsion points straight back at the agent
-it meets). The anticipation velocity model of Q. Xu, M. Chraibi, A. Seyfried, "Anticipation in
-a velocity-based model for pedestrian dynamics", Transportation Research Part C 133 (2021)
-103464 (arXiv:2107.00624), keeps the speed of Eqs. (2)–(3) and changes the direction in three
-phases — perception, prediction, strategy — and relaxes it with a reaction time. We read the
-phases as follows (the paper's validation is bidirectional flow and lane formation; the exact
-terms below are our reading, not a transcription):
+**Anticipation** (optional; ``[dynamics] model = "anticipation"``): the collision-free speed model
+lets counter-flowing groups jam head-on (each agent's repulsion points straight back at the agent it
+meets). The anticipation velocity model of Q. Xu, M. Chraibi, A. Seyfried, "Anticipation in a
+velocity-based model for pedestrian dynamics", Transportation Research Part C 133 (2021) 103464
+(arXiv:2107.00624), keeps the speed of Eqs. (2)–(3) and changes the direction in three phases —
+perception, prediction, strategy — and relaxes it with a reaction time. We read the phases as
+follows (the paper's validation is bidirectional flow and lane formation; the exact terms below are
+our reading, not a transcription):
 
 - *perception*: neighbour ``j`` counts with weight ``k_ij = max(0, e_i^0·(x_j − x_i)/‖x_j − x_i‖)``
   (in front of the desired direction; behind: 0);
@@ -42,16 +42,18 @@ terms below are our reading, not a transcription):
   the last step's velocity (when faster than 5 cm/s), ``Δt`` the time since the agent's last
   update. This relaxes the direction chosen among people, Eq. (4)'s bodies included: relaxing
   only the desired and sideways terms, with the bodies' repulsion at once, made the head-on
-  test no better than the plain model (23 % clear at 45 s). What acts at once, added after the
-  relaxation: the walls (relaxed, agents pressed by a crowd slid into them: 3 agent-steps
-  inside a wall in a door test), and the part of a body's repulsion beyond its value at
-  contact, ``(a e^{(ℓ_ij − s_ij)/D} − a)⁺`` (overlapping bodies only).
+  test no better than the plain model (23 % clear at 45 s). The walls act at once, added after
+  the relaxation (relaxed, agents pressed by a crowd slid into them: 3 agent-steps inside a
+  wall in a door test).
 
 Defaults ``t_a = 1`` s, ``a_a = 8``, ``D_a = 0.1`` m, ``τ = 0.3`` s (JuPedSim 1.4's AVM
 defaults), ``b = 0.05`` m, ``w = 0.1`` m. Measured on two groups of 230 walking head-on (20 m
-fronts, 1.4 /m²): 45 s after the start 60 % had walked clear past the other group, against 32 %
-with the plain model; the prediction without the reaction time did worse than the plain model
-(docs/crowd.md).
+fronts, 1.4 /m²): 45 s after the start 56 % had walked clear past the other group, against 32 %
+with the plain model; the prediction without the reaction time did worse than the plain model.
+Where it falls short (``bench/pedestrians.py --model anticipation``): 121 of 150 agents
+deadlock at a 0.8 m bottleneck (two bodies side by side fill it; the plain model stalls there
+too but frees itself), and its speed error over the HERMES corridor runs is 0.171 m/s against
+the plain model's 0.138 — so it is not the default (docs/crowd.md).
 
 Smoothness: the direction (Eq. 4) is smooth in positions and parameters; the speed is
 piecewise linear in the spacing and the spacing a minimum over a set decided by the direction
@@ -235,12 +237,8 @@ def avoid(
     ez = desired[:, 1] + jnp.sum(push * dz, axis=1)
     if motion is not None:
         sx, sz = _sideways(params, desired, motion, neighbours, valid, dx, dz, inv, size)
-        # The reaction time relaxes the direction people choose; walls act at once, and so
-        # does the part of a body's repulsion beyond its value at contact (overlap only).
+        # The reaction time relaxes the direction people choose; walls act at once.
         ex, ez = _react(params, motion, *_unit_xz(ex + sx, ez + sz))
-        overlap = jnp.maximum(push - params.strength * inv, 0.0)
-        ex = ex + jnp.sum(overlap * dx, axis=1)
-        ez = ez + jnp.sum(overlap * dz, axis=1)
     pad = jnp.concatenate([walls, jnp.zeros((1, 2, 2), walls.dtype)])
     ax, az = pad[:, 0, 0][wall_ids], pad[:, 0, 1][wall_ids]
     bx, bz = pad[:, 1, 0][wall_ids], pad[:, 1, 1][wall_ids]

@@ -80,7 +80,7 @@ class StepConfig:
     avoid: bool = False
     grid: GridSpec | None = None
     far_every: int = 1
-    anticipate: bool = True
+    anticipate: bool = False
 
     def check(self, levels: int) -> None:
         """Raise :class:`JcrowdError` unless the settings fit a model with ``levels`` levels."""

@@ -288,7 +288,7 @@ each) starts to fail near 0.4: measured, 3 touching pairs among 320 agents of ra
 default radius, 6.3 at the entrance experiment's 0.13 m."""
 
 
-DYNAMICS_MODELS = ("anticipation", "collision-free-speed")
+DYNAMICS_MODELS = ("collision-free-speed", "anticipation")
 """The values of ``[dynamics] model``."""
 
 
@@ -296,15 +296,15 @@ DYNAMICS_MODELS = ("anticipation", "collision-free-speed")
 class DynamicsSettings:
     """Crowd dynamics (``[dynamics]``). ``avoid``: agents avoid each other (the collision-free
     speed model drives every root; off: each walks its clips towards its waypoints as if alone).
-    ``model``: ``"anticipation"`` (people predict each other's paths a second ahead and step
-    aside early: counter-flows pass) or ``"collision-free-speed"`` (the plain model; see
-    :mod:`jcrowd.crowd.avoidance`). ``radius``: the body disc kept clear around each agent (m,
-    0.1–0.4). ``far_every``: agents drawn coarser than the blended near levels, or not drawn,
-    compute their avoidance every ``far_every`` steps, in turn (1–8; 1: every agent every
-    step)."""
+    ``model``: ``"collision-free-speed"`` (the plain model, validated on unidirectional flows) or
+    ``"anticipation"`` (people predict each other's paths a second ahead and step aside early:
+    counter-flows pass; see :mod:`jcrowd.crowd.avoidance`). ``radius``: the body disc kept clear
+    around each agent (m, 0.1–0.4). ``far_every``: agents drawn coarser than the blended near
+    levels, or not drawn, compute their avoidance every ``far_every`` steps, in turn (1–8; 1: every
+    agent every step)."""
 
     avoid: bool = False
-    model: str = "anticipation"
+    model: str = "collision-free-speed"
     radius: float = 0.2
     far_every: int = 1
 
