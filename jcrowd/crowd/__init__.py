@@ -6,11 +6,9 @@ a recorded agent back into a clip. It never touches files, rendering or the CLI 
 contract checked in CI).
 """
 
-from jcrowd.crowd.avoidance import CANDIDATE_TIERS as CANDIDATE_TIERS
 from jcrowd.crowd.avoidance import AvoidanceParams as AvoidanceParams
 from jcrowd.crowd.avoidance import Motion as Motion
 from jcrowd.crowd.avoidance import avoid as avoid
-from jcrowd.crowd.avoidance import avoid_in_grid as avoid_in_grid
 from jcrowd.crowd.avoidance import avoid_one as avoid_one
 from jcrowd.crowd.avoidance import closest_on_segments as closest_on_segments
 from jcrowd.crowd.blocking import OneStepAtATime as OneStepAtATime
@@ -31,6 +29,8 @@ from jcrowd.crowd.dynamics import wall_segments as wall_segments
 from jcrowd.crowd.dynamics import walls_near_cells as walls_near_cells
 from jcrowd.crowd.export import RECORD_KEYS as RECORD_KEYS
 from jcrowd.crowd.export import agent_motion as agent_motion
+from jcrowd.crowd.grid_avoidance import CANDIDATE_TIERS as CANDIDATE_TIERS
+from jcrowd.crowd.grid_avoidance import avoid_in_grid as avoid_in_grid
 from jcrowd.crowd.lod import Buckets as Buckets
 from jcrowd.crowd.lod import CameraView as CameraView
 from jcrowd.crowd.lod import assign_buckets as assign_buckets

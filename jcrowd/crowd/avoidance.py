@@ -61,41 +61,23 @@ piecewise linear in the spacing and the spacing a minimum over a set decided by 
 
 Conventions: positions ``[x, z]`` in metres, velocities m/s. Neighbours are given as candidate
 ids (:func:`jcrowd.crowd.neighbours.candidates`, ``N`` for none) and walls as segments
-``(S, 2, 2)`` with per-agent candidate segment ids (``S`` for none).
+``(S, 2, 2)`` with per-agent candidate segment ids (``S`` for none). The step evaluates the
+model through the neighbour grid with :func:`jcrowd.crowd.grid_avoidance.avoid_in_grid`.
 """
 
 from __future__ import annotations
 
-import itertools
-from collections.abc import Callable
-from functools import partial
-
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.neighbours import CellList, GridSpec, near_places
-
 __all__ = [
-    "BUCKET_DIVISORS",
-    "CANDIDATE_TIERS",
     "AvoidanceParams",
     "Motion",
     "avoid",
-    "avoid_in_grid",
     "avoid_one",
     "closest_on_segments",
 ]
-
-CANDIDATE_TIERS = (8, 32)
-"""Candidates read per agent, tier by tier (:func:`avoid_in_grid`): an agent whose 3 × 3 cells
-hold fewer others than a tier's count has them all there; a denser one moves on to the next
-tier, and past the last to nine full cells."""
-
-BUCKET_DIVISORS = (64, 8)
-"""The agents moving on to a tier are evaluated in the smallest bucket of ``N / d`` agents
-(at least 64) that holds them all, else all ``N`` agents are (one branch runs)."""
 
 _WALKING = 0.3  # m/s: a neighbour slower than this counts as partly standing (anticipation)
 _TINY = 1e-6  # m: distances below this count as coincident (direction left undefined → 0)
@@ -317,93 +299,3 @@ def _unit_xz(ex: Array, ez: Array) -> tuple[Array, Array]:
         jnp.where(ok, ex / jnp.maximum(norm, _TINY), 0.0),
         jnp.where(ok, ez / jnp.maximum(norm, _TINY), 0.0),
     )
-
-
-def avoid_in_grid(
-    params: AvoidanceParams,
-    grid: GridSpec,
-    cells: CellList,
-    position: Float[Array, "n 2"],
-    desired: Float[Array, "n 2"],
-    speed: Float[Array, " n"],
-    radius: Float[Array, " n"],
-    alive: Bool[Array, " n"],
-    others: tuple[Array, Array],
-    rows: Int[Array, " n"],
-    walls: Float[Array, "S 2 2"],
-    wall_ids: Int[Array, "n W"],
-    motion: Motion | None = None,
-) -> Float[Array, "n 2"]:
-    """:func:`avoid` for agents whose neighbours are the crowd in ``cells``, reading only as
-    many candidates as each agent has. Agents not alive get velocity 0. With ``motion``
-    (``crowd`` in the rows of ``others``) the agents anticipate.
-
-    ``others = (positions (P, 2), radii (P,))`` is the crowd ``cells`` was filled from and
-    ``rows`` the agents' own ids in it (they are not their own neighbours). The crowd is read
-    in cell order (:class:`~jcrowd.crowd.neighbours.CellList`), so a candidate is one read.
-    Everyone is first evaluated with the first :data:`CANDIDATE_TIERS` ``[0]`` candidates; an
-    agent with that many or more is evaluated again with the next tier's count (the last tier
-    holds nine full cells), in the smallest bucket of :data:`BUCKET_DIVISORS` that holds all
-    such agents, or all agents at that tier when none does (one branch runs). Same
-    velocities as :func:`avoid` with :func:`~jcrowd.crowd.neighbours.candidates`, but for the
-    order of the sums.
-    """
-    n = position.shape[0]
-    pos, rad = others
-    order = cells.order
-    pos_c = jnp.concatenate([pos, jnp.zeros((1, 2), pos.dtype)])[order]  # cell order
-    rad_c = jnp.concatenate([rad, jnp.zeros((1,), rad.dtype)])[order]
-    own = cells.place[rows]
-    if motion is not None:
-        vel_c = jnp.concatenate([motion.crowd, jnp.zeros((1, 2), motion.crowd.dtype)])[order]
-
-    def velocities(sel: Array, near: Array) -> Array:
-        moving = None
-        if motion is not None:
-            dt = motion.dt[sel] if motion.dt.ndim else motion.dt
-            moving = Motion(motion.own[sel], vel_c, dt)
-        v, _ = avoid(
-            params,
-            position[sel],
-            desired[sel],
-            speed[sel],
-            radius[sel],
-            near,
-            walls,
-            wall_ids[sel],
-            others=(pos_c, rad_c),
-            motion=moving,
-        )
-        return v
-
-    tiers = [k for k in CANDIDATE_TIERS if k < 9 * grid.capacity] + [9 * grid.capacity]
-    buckets = sorted({min(n, max(64, n // d)) for d in BUCKET_DIVISORS})
-    everyone = jnp.arange(n, dtype=jnp.int32)
-    near, count = near_places(grid, cells, position, tiers[0], own)
-    velocity = velocities(everyone, near)
-    for below, k in itertools.pairwise(tiers):
-        dense = alive & (count >= below)
-        n_dense = jnp.sum(dense, dtype=jnp.int32)
-
-        def keep(velocity: Array) -> Array:
-            return velocity
-
-        def in_bucket(velocity: Array, dense: Array = dense, k: int = k, *, b: int) -> Array:
-            (idx,) = jnp.nonzero(dense, size=b, fill_value=n)
-            safe = jnp.where(idx < n, idx, 0)
-            full, _ = near_places(grid, cells, position[safe], k, own[safe])
-            return velocity.at[idx].set(velocities(safe, full), mode="drop")
-
-        def all_agents(velocity: Array, k: int = k) -> Array:
-            full, _ = near_places(grid, cells, position, k, own)
-            return velocities(everyone, full)
-
-        branches: list[Callable[[Array], Array]] = [
-            keep,
-            *(partial(in_bucket, b=b) for b in buckets),
-            all_agents,
-        ]
-        larger = sum((n_dense > b).astype(jnp.int32) for b in buckets)
-        which = jnp.where(n_dense == 0, 0, 1 + larger)
-        velocity = jax.lax.switch(which, branches, velocity)
-    return jnp.where(alive[:, None], velocity, 0.0)

@@ -24,8 +24,9 @@ import numpy as np
 import shapely
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.avoidance import AvoidanceParams, Motion, avoid_in_grid
+from jcrowd.crowd.avoidance import AvoidanceParams, Motion
 from jcrowd.crowd.blocking import OneStepAtATime
+from jcrowd.crowd.grid_avoidance import avoid_in_grid
 from jcrowd.crowd.navigation import (
     Navigation,
     desired_directions,

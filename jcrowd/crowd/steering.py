@@ -25,7 +25,8 @@ from collections.abc import Callable
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.avoidance import AvoidanceParams, Motion, avoid_in_grid
+from jcrowd.crowd.avoidance import AvoidanceParams, Motion
+from jcrowd.crowd.grid_avoidance import avoid_in_grid
 from jcrowd.crowd.navigation import desired_directions, field_values
 from jcrowd.crowd.neighbours import GridSpec, cell_index, cell_list
 from jcrowd.crowd.scene import Scene
