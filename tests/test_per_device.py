@@ -1,8 +1,8 @@
-"""The step split over several devices (``jcrowd.crowd.simulate._per_device_step``).
+"""The step split over several devices (``jcrowd.crowd.devices.split_step``).
 
 Oracle: the split step on ``K`` devices equals the one-device step run on each device's block
-of agents (agents ``k, k + K, …``: :func:`~jcrowd.crowd.simulate.agent_order`) separately with
-:func:`~jcrowd.crowd.simulate.per_device_config`'s share of the budget, the blocks' frames joined
+of agents (agents ``k, k + K, …``: :func:`~jcrowd.crowd.devices.agent_order`) separately with
+:func:`~jcrowd.crowd.devices.per_device_config`'s share of the budget, the blocks' frames joined
 with agent ids and the counters summed — including when the budget binds. When it does not bind, it
 also equals the one-device step on the whole crowd.
 

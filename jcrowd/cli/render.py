@@ -129,7 +129,8 @@ def render_scenario(
     from rich.console import Console
     from rich.progress import Progress
 
-    from jcrowd.crowd.simulate import in_agent_order, prepare, shard_state
+    from jcrowd.crowd.devices import in_agent_order, shard_state
+    from jcrowd.crowd.simulate import prepare
     from jcrowd.crowd.synthesis import point_parents
     from jcrowd.render import CrowdRenderer, LevelInstances, write_png
 
@@ -146,7 +147,7 @@ def render_scenario(
     _, first = jax.block_until_ready(fn(warm, sim.view_at(0.0), sim.dt_array))
     compile_s = time.perf_counter() - t0
     # Slots per level as the step returns them (split over K devices a level holds K shares of
-    # its capacity, rounded up: jcrowd.crowd.simulate.per_device_config).
+    # its capacity, rounded up: jcrowd.crowd.devices.per_device_config).
     caps = tuple(int(s.shape[0]) for s in first.slots)
     step_ms, draw_ms = [], []
     sink = _Sink(out, scenario.fps)

@@ -140,7 +140,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _run(args: argparse.Namespace) -> dict[str, Any]:
-    from jcrowd.crowd.simulate import prepare, shard_state
+    from jcrowd.crowd.devices import shard_state
+    from jcrowd.crowd.simulate import prepare
     from jcrowd.errors import JcrowdError
     from jcrowd.scenario.parse import load_scenario
 
@@ -242,7 +243,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
     from rich.console import Console
     from rich.progress import Progress
 
-    from jcrowd.crowd.simulate import in_agent_order
+    from jcrowd.crowd.devices import in_agent_order
 
     step = sim.compiled()
     n = sim.num_agents

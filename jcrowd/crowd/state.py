@@ -158,7 +158,7 @@ class CrowdState(eqx.Module):
     queue: Int[Array, "N Q"]
     next_row: Int[Array, " N"]
     agent: Int[Array, " N"]
-    # Devices whose blocks hold the agents interleaved (jcrowd.crowd.simulate.shard_state): with K
+    # Devices whose blocks hold the agents interleaved (jcrowd.crowd.devices.shard_state): with K
     # > 1 position p of every array is agent agent_order(N, K)[p], not agent p.
     interleave: int = eqx.field(static=True, default=1)
 
