@@ -37,21 +37,29 @@ def _oracle(pos, desired, speed, radius, walls):
             d = pos[i] - pos[j]
             s = np.hypot(*d)
             e += A * np.exp((radius[i] + radius[j] - s) / D) * d / s
-        for a, b in walls:
-            t = np.clip(np.dot(pos[i] - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
-            d = pos[i] - (a + t * (b - a))
-            s = np.hypot(*d)
-            e += AW * np.exp((radius[i] - s) / DW) * d / s
-        e /= np.hypot(*e)
-        for j in range(n):
-            if j == i:
-                continue
-            u = pos[j] - pos[i]
-            size = radius[i] + radius[j]
-            if np.dot(u, e) >= 0 and abs(u[0] * e[1] - u[1] * e[0]) <= size:
-                gaps[i] = min(gaps[i], np.hypot(*u) - size)
-        vel[i] = min(speed[i], max(0.0, gaps[i] / T)) * e
+        vel[i], gaps[i] = _walls_then_speed(i, e, pos, speed, radius, walls)
     return vel, gaps
+
+
+def _walls_then_speed(i, e, pos, speed, radius, walls):
+    """Agent ``i``'s direction ``e`` plus the walls' repulsion, normalised (Eq. 4's end), then
+    its spacing and speed along it (Eqs. 2–3): ``(velocity, spacing)``."""
+    e = np.array(e, np.float64)
+    for a, b in walls:
+        t = np.clip(np.dot(pos[i] - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+        d = pos[i] - (a + t * (b - a))
+        s = np.hypot(*d)
+        e += AW * np.exp((radius[i] - s) / DW) * d / s
+    e /= np.hypot(*e)
+    gap = np.inf
+    for j in range(len(pos)):
+        if j == i:
+            continue
+        u = pos[j] - pos[i]
+        size = radius[i] + radius[j]
+        if np.dot(u, e) >= 0 and abs(u[0] * e[1] - u[1] * e[0]) <= size:
+            gap = min(gap, np.hypot(*u) - size)
+    return min(speed[i], max(0.0, gap / T)) * e, gap
 
 
 def _scene(n, seed, spread=3.0):
@@ -302,20 +310,7 @@ def _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt):
         prev = vel[i] / sp if sp > 0.05 else e
         e = prev + (e - prev) * min(1.0, dt / TAU)
         e /= np.hypot(*e)
-        for a, b in walls:
-            t = np.clip(np.dot(pos[i] - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
-            d = pos[i] - (a + t * (b - a))
-            s = np.hypot(*d)
-            e += AW * np.exp((radius[i] - s) / DW) * d / s
-        e /= np.hypot(*e)
-        for j in range(n):
-            if j == i:
-                continue
-            u = pos[j] - pos[i]
-            size = radius[i] + radius[j]
-            if np.dot(u, e) >= 0 and abs(u[0] * e[1] - u[1] * e[0]) <= size:
-                gaps[i] = min(gaps[i], np.hypot(*u) - size)
-        vel_out[i] = min(speed[i], max(0.0, gaps[i] / T)) * e
+        vel_out[i], gaps[i] = _walls_then_speed(i, e, pos, speed, radius, walls)
     return vel_out, gaps
 
 
