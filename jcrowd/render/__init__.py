@@ -17,6 +17,8 @@ from jcrowd.render.camera import view_matrix as view_matrix
 from jcrowd.render.context import check_gl as check_gl
 from jcrowd.render.context import gl_renderer as gl_renderer
 from jcrowd.render.context import make_context as make_context
+from jcrowd.render.levels import LevelInstances as LevelInstances
+from jcrowd.render.levels import LevelMesh as LevelMesh
 from jcrowd.render.meshes import GROUP_COLORS as GROUP_COLORS
 from jcrowd.render.meshes import LEVEL_COLORS as LEVEL_COLORS
 from jcrowd.render.meshes import palette_colors as palette_colors
@@ -24,8 +26,6 @@ from jcrowd.render.output import VIDEO_SUFFIXES as VIDEO_SUFFIXES
 from jcrowd.render.output import VideoWriter as VideoWriter
 from jcrowd.render.output import write_png as write_png
 from jcrowd.render.renderer import CrowdRenderer as CrowdRenderer
-from jcrowd.render.renderer import LevelInstances as LevelInstances
-from jcrowd.render.renderer import LevelMesh as LevelMesh
 
 __all__ = [
     "GROUP_COLORS",

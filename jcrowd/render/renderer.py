@@ -19,17 +19,17 @@ points behind the camera are removed by ordinary clipping.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
 import moderngl
 import numpy as np
-from jaxtyping import Bool, Float
+from jaxtyping import Float
 
 from jcrowd.errors import RenderError
 from jcrowd.render.camera import View, projection_matrix, view_matrix
 from jcrowd.render.context import check_gl, gl_renderer, make_context
+from jcrowd.render.levels import LevelInstances, LevelMesh
 from jcrowd.render.meshes import (
     CAPSULE_FRAGMENT,
     CAPSULE_VERTEX,
@@ -42,65 +42,13 @@ from jcrowd.render.meshes import (
     ground_mesh,
 )
 
-__all__ = ["CrowdRenderer", "LevelInstances", "LevelMesh"]
+__all__ = ["CrowdRenderer"]
 
 _LIGHT_DIR = np.array([0.35, 0.85, 0.40]) / np.linalg.norm([0.35, 0.85, 0.40])  # sun, from above
 _AMBIENT = 0.40
 _GROUND = (0.74, 0.74, 0.70)
 _GRID_LINE = (0.52, 0.52, 0.50)
 _FLOATS_PER_BONE = 9  # start xyz, end xyz, colour rgb
-
-
-@dataclass(frozen=True)
-class LevelMesh:
-    """The skeleton topology one LOD level is drawn with.
-
-    Attributes:
-        parents: parent index of each joint of that level's skeleton, -1 for a root; parents
-            come before their children (``parents[j] < j``). Every joint with a parent is the
-            end of one bone (drawn as a capsule from the parent to it).
-    """
-
-    parents: tuple[int, ...]
-
-    def __post_init__(self) -> None:
-        p = tuple(int(x) for x in self.parents)
-        if len(p) == 0:
-            raise RenderError("LevelMesh: expected at least one joint, found none")
-        bad = [j for j, q in enumerate(p) if not -1 <= q < j]
-        if bad:
-            raise RenderError(
-                f"LevelMesh: expected parents[j] in [-1, j) (topological order), found "
-                f"parents[{bad[0]}] = {p[bad[0]]}"
-            )
-        object.__setattr__(self, "parents", p)
-
-    @property
-    def num_joints(self) -> int:
-        """Joints in this level's skeleton."""
-        return len(self.parents)
-
-    @property
-    def bones(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(parent_index, joint_index)`` int64 arrays, one entry per bone."""
-        joints = np.array([j for j, q in enumerate(self.parents) if q >= 0], np.int64)
-        return np.asarray(self.parents, np.int64)[joints], joints
-
-
-@dataclass(frozen=True)
-class LevelInstances:
-    """One LOD level's agents in a frame, in fixed-capacity slots.
-
-    Attributes:
-        joints: ``(C, J, 3)`` world positions (m, y up) of that level's ``J`` joints; NumPy or
-            device arrays (copied to the host once).
-        valid: ``(C,)`` bool, the slots to draw; padding slots are False and may hold anything.
-        colors: ``(C, 3)`` RGB in [0, 1] per slot (e.g. from ``LEVEL_COLORS``).
-    """
-
-    joints: Float[Any, "C J 3"]
-    valid: Bool[Any, " C"]
-    colors: Float[Any, "C 3"]
 
 
 class _Level:
