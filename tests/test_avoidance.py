@@ -32,13 +32,18 @@ def _oracle(pos, desired, speed, radius, walls):
     for i in range(n):
         e = np.array(desired[i], np.float64)
         for j in range(n):
-            if j == i:
-                continue
-            d = pos[i] - pos[j]
-            s = np.hypot(*d)
-            e += A * np.exp((radius[i] + radius[j] - s) / D) * d / s
+            if j != i:
+                e += _body_push(i, j, pos, radius)
         vel[i], gaps[i] = _walls_then_speed(i, e, pos, speed, radius, walls)
     return vel, gaps
+
+
+def _body_push(i, j, pos, radius):
+    """Eq. (4)'s repulsion of agent ``i`` by agent ``j``: ``a e^{(ℓ_ij − s_ij)/D}`` along
+    ``x_i − x_j``."""
+    d = pos[i] - pos[j]
+    s = np.hypot(*d)
+    return A * np.exp((radius[i] + radius[j] - s) / D) * d / s
 
 
 def _walls_then_speed(i, e, pos, speed, radius, walls):
@@ -292,9 +297,9 @@ def _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt):
         for j in range(n):
             if j == i:
                 continue
+            e += _body_push(i, j, pos, radius)
             d = pos[i] - pos[j]
             s = np.hypot(*d)
-            e += A * np.exp((radius[i] + radius[j] - s) / D) * d / s
             # Prediction: x_i − x_j over the horizon at constant velocities.
             sep = d[None] + (vel[i] - vel[j])[None] * times[:, None]
             k = np.argmin(np.hypot(sep[:, 0], sep[:, 1]))

@@ -198,9 +198,10 @@ def avoid(
     (``S`` for none). With ``others = (positions (P, 2), radii (P,))`` the ids index those
     instead (``P`` for none): the agents stepped here are then a block of a larger crowd, as on
     one device of several. Returns ``(velocity (N, 2), spacing (N,))``, what :func:`avoid_one`
-    gives agent by agent. Written on ``(N, M)`` arrays per coordinate rather than as a ``vmap``
-    of :func:`avoid_one` over ``(M, 2)`` rows: XLA:CPU vectorizes loops over one contiguous
-    axis, and a minor axis of length 2 defeats that.
+    gives agent by agent without ``motion`` (anticipation is checked against its own oracle,
+    ``tests/test_avoidance.py``). Written on ``(N, M)`` arrays per coordinate rather than as a
+    ``vmap`` of :func:`avoid_one` over ``(M, 2)`` rows: XLA:CPU vectorizes loops over one
+    contiguous axis, and a minor axis of length 2 defeats that.
     """
     s = walls.shape[0]
     x, z = position[:, 0], position[:, 1]
@@ -259,8 +260,8 @@ def _sideways(
     """The anticipatory sideways step ``Σ_j k_ij a_a e^{(ℓ_ij − s^a_ij)/D_a} tanh(…) r_i``
     (module docstring) on ``(N, M)`` arrays; ``dx, dz`` are ``x_i − x_j``."""
     crowd = jnp.concatenate([motion.crowd, jnp.zeros((1, 2), motion.crowd.dtype)])
-    wx = motion.own[:, 0:1] - crowd[:, 0][neighbours]  # v_i − v_j
-    wz = motion.own[:, 1:2] - crowd[:, 1][neighbours]
+    vjx, vjz = crowd[:, 0][neighbours], crowd[:, 1][neighbours]  # v_j
+    wx, wz = motion.own[:, 0:1] - vjx, motion.own[:, 1:2] - vjz  # v_i − v_j
     w2 = wx * wx + wz * wz
     closing = -(dx * wx + dz * wz)
     t = jnp.clip(closing / jnp.maximum(w2, _TINY**2), 0.0, params.anticipation_time)
@@ -270,7 +271,6 @@ def _sideways(
     rx, rz = -d0z, d0x  # the right of the desired direction (y up)
     front = jnp.maximum(0.0, -(dx * d0x + dz * d0z) * inv)  # k_ij
     # Following: a neighbour walking my way, or standing, is followed, not stepped around.
-    vjx, vjz = crowd[:, 0][neighbours], crowd[:, 1][neighbours]
     vj = jnp.sqrt(vjx * vjx + vjz * vjz)
     # (1 − cos)/2 of the angle between v_j and e_i^0, times min(1, ‖v_j‖/_WALKING), in one.
     front = front * (vj - (vjx * d0x + vjz * d0z)) / (2 * jnp.maximum(vj, _WALKING))

@@ -113,17 +113,19 @@ def steer(
     pos, rad, live = every[:, :2], every[:, 2], every[:, 3] > 0.5
     rows = jnp.arange(n, dtype=jnp.int32) if ids is None else ids
     cells = cell_list(grid, pos, live)
-    own = jnp.stack([px, pz], axis=1)
-    elapsed = jnp.broadcast_to(jnp.asarray(dt, x.dtype), (n,))
+    motion = None
+    if anticipate:
+        elapsed = jnp.broadcast_to(jnp.asarray(dt, x.dtype), (n,))
+        motion = Motion(jnp.stack([px, pz], axis=1), every[:, 4:6], elapsed)
     if due is not None:
         sel = jnp.where(due < n, due, 0)
         in_sel = alive[sel] & (due < n)
         x, z, tx, tz, speed, radius, rows = (a[sel] for a in (x, z, tx, tz, speed, radius, rows))
         field = None if field is None else field[sel]
-        own, elapsed = own[sel], elapsed[sel]
+        if motion is not None:
+            motion = Motion(motion.own[sel], motion.crowd, motion.dt[sel])
     else:
         in_sel = alive
-    motion = Motion(own, every[:, 4:6], elapsed) if anticipate else None
     dx, dz = tx - x, tz - z
     norm = jnp.sqrt(dx * dx + dz * dz)
     desired = jnp.stack([dx, dz], axis=1) / jnp.maximum(norm, 1e-6)[:, None]
