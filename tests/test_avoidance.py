@@ -22,7 +22,8 @@ from jcrowd.crowd import (
     grid_spec,
 )
 
-A, D, AW, DW, T = 8.0, 0.1, 5.0, 0.02, 1.0
+A, D, AW, DW, T = 8.0, 0.1, 5.0, 0.02, 0.6
+SHARP, LAMBDA, SLIDE = 4.0, 0.3, 0.1  # V's sharpness n, the anisotropy λ, the slide reach m
 
 
 def _oracle(pos, desired, speed, radius, walls):
@@ -30,20 +31,49 @@ def _oracle(pos, desired, speed, radius, walls):
     n = len(pos)
     vel, gaps = np.zeros((n, 2)), np.full(n, np.inf)
     for i in range(n):
-        e = np.array(desired[i], np.float64)
+        e0 = _slid(i, desired[i], pos, radius, walls)
+        e = e0.copy()
         for j in range(n):
             if j != i:
-                e += _body_push(i, j, pos, radius)
+                e += _body_push(i, j, pos, radius, e0)
         vel[i], gaps[i] = _walls_then_speed(i, e, pos, speed, radius, walls)
     return vel, gaps
 
 
-def _body_push(i, j, pos, radius):
+def _slid(i, desired, pos, radius, walls):
+    """Agent ``i``'s desire with the into-wall part taken by the wall it presses into most:
+    each wall's push-in ``reach · min(0, e^0·n)``, ``reach`` 1 at contact falling to 0 at
+    ``SLIDE`` beyond it; the most negative one is taken off along its ``n``."""
+    e0 = np.array(desired, np.float64)
+    worst, normal = 0.0, np.zeros(2)
+    for a, b in walls:
+        t = np.clip(np.dot(pos[i] - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+        d = pos[i] - (a + t * (b - a))
+        s = np.hypot(*d)
+        reach = min(1.0, max(0.0, (radius[i] + SLIDE - s) / SLIDE))
+        push_in = reach * min(0.0, np.dot(e0, d / s))
+        if push_in < worst:
+            worst, normal = push_in, d / s
+    e0 = e0 - worst * normal
+    return e0 / np.hypot(*e0)
+
+
+def _body_push(i, j, pos, radius, e0):
     """Eq. (4)'s repulsion of agent ``i`` by agent ``j``: ``a e^{(ℓ_ij − s_ij)/D}`` along
-    ``x_i − x_j``."""
+    ``x_i − x_j``, weighted ``λ + (1 − λ)(1 + cos φ)/2`` by the angle ``φ`` between ``e0`` and
+    the direction to ``j``."""
     d = pos[i] - pos[j]
     s = np.hypot(*d)
-    return A * np.exp((radius[i] + radius[j] - s) / D) * d / s
+    cos = np.dot(-d / s, e0)
+    return (LAMBDA + (1 - LAMBDA) * (1 + cos) / 2) * A * np.exp((radius[i] + radius[j] - s) / D) * d / s
+
+
+def _speed(v0, gap):
+    """V(s − ℓ): ``v0 x (1 + x^n)^{−1/n}``, ``x = gap/(v0 T)``; 0 without room."""
+    if gap <= 0:
+        return 0.0
+    x = gap / (v0 * T)
+    return v0 * x / (1 + x**SHARP) ** (1 / SHARP) if np.isfinite(x) else v0
 
 
 def _walls_then_speed(i, e, pos, speed, radius, walls):
@@ -64,7 +94,12 @@ def _walls_then_speed(i, e, pos, speed, radius, walls):
         size = radius[i] + radius[j]
         if np.dot(u, e) >= 0 and abs(u[0] * e[1] - u[1] * e[0]) <= size:
             gap = min(gap, np.hypot(*u) - size)
-    return min(speed[i], max(0.0, gap / T)) * e, gap
+    for a, b in walls:  # a wall ahead: a neighbour of size 0 at its closest point
+        t = np.clip(np.dot(pos[i] - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+        u = a + t * (b - a) - pos[i]
+        if np.dot(u, e) >= 0 and abs(u[0] * e[1] - u[1] * e[0]) <= radius[i]:
+            gap = min(gap, np.hypot(*u) - radius[i])
+    return _speed(speed[i], gap) * e, gap
 
 
 def _scene(n, seed, spread=3.0):
@@ -121,17 +156,20 @@ def test_a_dense_scene_through_the_grid_equals_all_pairs_beyond_the_cutoff():
 
 
 def test_closed_forms():
-    """Alone: walks at its free speed; behind someone at gap g: speed g/T (the repulsion
-    a·e^{−g/D} only shortens the +z direction); touching (g = 0): R = a = 8 outweighs the
-    desire, the direction flips and, nobody being behind, it backs off at its free speed."""
+    """Alone: walks at its free speed; behind someone at gap g: ``V(g) = v0 x (1 + x⁴)^{−¼}``,
+    ``x = g/(v0 T)`` (the repulsion a·e^{−g/D} only shortens the +z direction), worked by hand:
+    g = 0.5 m → x = 0.6410, V = 0.8014 m/s; g = 2 m → x = 2.564, V = 1.2926 m/s. Touching
+    (g = 0): R = a = 8 outweighs the desire, the direction flips and, nobody being behind, it
+    backs off at its free speed."""
     walls = np.zeros((0, 2, 2))
-    for gap, want in ((None, 1.3), (0.5, 0.5), (2.0, 1.3), (0.0, -1.3)):
+    for gap, want in ((None, 1.3), (0.5, 0.8014), (2.0, 1.2926), (0.0, -1.3)):
         pos = [[0.0, 0.0]] if gap is None else [[0.0, 0.0], [0.0, 0.4 + gap]]
         n = len(pos)
         v, _ = _run(
             np.array(pos), np.tile([0.0, 1.0], (n, 1)), np.full(n, 1.3), np.full(n, 0.2), walls
         )
-        np.testing.assert_allclose(np.asarray(v)[0], [0.0, want], atol=1e-6)
+        # 1e-4: the hand-worked values are rounded to 4 decimals.
+        np.testing.assert_allclose(np.asarray(v)[0], [0.0, want], atol=1e-4)
 
 
 def test_a_wall_turns_an_agent_walking_into_it():
@@ -292,21 +330,22 @@ def _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt):
     vel_out, gaps = np.zeros((n, 2)), np.full(n, np.inf)
     times = np.linspace(0.0, TA, 200001)
     for i in range(n):
-        e = np.array(desired[i], np.float64)
-        right = np.array([-desired[i][1], desired[i][0]])
+        e0 = _slid(i, desired[i], pos, radius, walls)
+        e = e0.copy()
+        right = np.array([-e0[1], e0[0]])
         for j in range(n):
             if j == i:
                 continue
-            e += _body_push(i, j, pos, radius)
+            e += _body_push(i, j, pos, radius, e0)
             d = pos[i] - pos[j]
             s = np.hypot(*d)
             # Prediction: x_i − x_j over the horizon at constant velocities.
             sep = d[None] + (vel[i] - vel[j])[None] * times[:, None]
             k = np.argmin(np.hypot(sep[:, 0], sep[:, 1]))
             p = sep[k]
-            ahead = max(0.0, np.dot(-d / s, desired[i]))
+            ahead = max(0.0, np.dot(-d / s, e0))
             vj = np.hypot(*vel[j])
-            against = (1.0 - np.dot(vel[j] / vj, desired[i])) / 2 if vj > 0 else 0.0
+            against = (1.0 - np.dot(vel[j] / vj, e0)) / 2 if vj > 0 else 0.0
             weight = ahead * against * min(1.0, vj / WALKING)
             strength = AA * np.exp((radius[i] + radius[j] - np.hypot(*p)) / DA)
             e += weight * strength * np.tanh((np.dot(p, right) + KEEP) / WIDTH) * right
@@ -480,6 +519,8 @@ def test_a_time_per_agent_equals_each_agents_own_step():
         return np.asarray(v)
 
     got, short, long_ = run(times), run(0.1), run(0.4)
-    np.testing.assert_allclose(got[0::2], short[0::2], atol=1e-7)
-    np.testing.assert_allclose(got[1::2], long_[1::2], atol=1e-7)
+    # A few float32 ulps of a ~1 m/s velocity: a vector of times and a broadcast scalar are fused
+    # into different XLA loops, which may round differently.
+    np.testing.assert_allclose(got[0::2], short[0::2], atol=1e-6)
+    np.testing.assert_allclose(got[1::2], long_[1::2], atol=1e-6)
     assert np.abs(short - long_).max() > 1e-3  # premise: the time matters
