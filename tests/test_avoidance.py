@@ -65,7 +65,8 @@ def _body_push(i, j, pos, radius, e0):
     d = pos[i] - pos[j]
     s = np.hypot(*d)
     cos = np.dot(-d / s, e0)
-    return (LAMBDA + (1 - LAMBDA) * (1 + cos) / 2) * A * np.exp((radius[i] + radius[j] - s) / D) * d / s
+    weight = LAMBDA + (1 - LAMBDA) * (1 + cos) / 2
+    return weight * A * np.exp((radius[i] + radius[j] - s) / D) * d / s
 
 
 def _speed(v0, gap):
