@@ -22,7 +22,12 @@ from jcrowd.crowd.scene import Scene
 from jcrowd.crowd.state import CrowdState, StepConfig
 from jcrowd.crowd.steering import aim_point, current_field, waypoint_xz
 
-__all__ = ["schedule"]
+__all__ = ["PASS_REACH", "schedule"]
+
+PASS_REACH = 2.0
+"""With avoidance, a waypoint within this many reaches also counts as passed once the agent is
+past it along the next leg: a crowd converging on one point otherwise packs round it, the agents
+in front walking on towards the next waypoint against those still arriving."""
 
 
 def schedule(
@@ -44,7 +49,14 @@ def schedule(
     n = state.num_agents
     last = float(cm.frames - 1)
     tx, tz = waypoint_xz(state.waypoints, state.waypoint)
-    near = (tx - state.x) ** 2 + (tz - state.z) ** 2 < config.reach**2
+    d2 = (tx - state.x) ** 2 + (tz - state.z) ** 2
+    near = d2 < config.reach**2
+    if config.avoid:  # in a crowd: also passed once past it along the next leg, near it
+        nxt = state.waypoint + 1
+        has_next = (nxt < state.num_waypoints) | state.loop
+        nx, nz = waypoint_xz(state.waypoints, jnp.where(nxt < state.num_waypoints, nxt, 0))
+        past = (state.x - tx) * (nx - tx) + (state.z - tz) * (nz - tz) > 0.0
+        near = near | (has_next & past & (d2 < (PASS_REACH * config.reach) ** 2))
     if scene is not None:  # reached on entering the target (a goal region: the exit)
         near = field_values(scene.nav, current_field(state), state.x, state.z) <= 0.0
     reached = state.alive & near
