@@ -76,10 +76,11 @@ Defaults ``t_a = 1`` s, ``a_a = 8``, ``D_a = 0.1`` m, ``τ = 0.3`` s (JuPedSim 1
 defaults), ``b = 0.05`` m, ``w = 0.1`` m. Measured on two groups of 230 walking head-on (20 m
 fronts, 1.4 /m²): 45 s after the start 56 % had walked clear past the other group, against 32 %
 with the plain model; the prediction without the reaction time did worse than the plain model.
-Where it falls short (``bench/pedestrians.py --model anticipation``): 121 of 150 agents
-deadlock at a 0.8 m bottleneck (two bodies side by side fill it; the plain model stalls there
-too but frees itself), and its speed error over the HERMES corridor runs is 0.171 m/s against
-the plain model's 0.138 — so it is not the default (docs/crowd.md).
+Where it falls short (``bench/pedestrians.py --model anticipation``, with the four changes
+above): people step sideways in front of the Wuppertal entrance's 0.5 m gap and pass it at
+0.83 /s against the measured 1.16 (the plain model: 1.14), and the wide HERMES run comes out
+35 % too thin — so it is not the default (docs/crowd.md). Its HERMES speed error is 0.105 m/s
+(plain: 0.138).
 
 Smoothness: the direction (Eq. 4) and ``V`` are smooth in positions and parameters; the spacing
 is a minimum over a set decided by the direction (Eq. 3) and the slide picks one wall, so the
