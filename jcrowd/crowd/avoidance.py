@@ -216,8 +216,7 @@ def avoid_one(
     away, dist = _unit(position - others)  # e_ij and s_ij
     size = radius + other_radius  # ℓ_ij
     push = jnp.where(other_valid, params.strength * jnp.exp((size - dist) / params.range), 0.0)
-    front = -(away @ desired)  # cos φ_ij
-    push = push * (params.anisotropy + (1.0 - params.anisotropy) * 0.5 * (1.0 + front))
+    push = push * _behind_weight(params, -(away @ desired))
     direction = desired + jnp.sum(push[:, None] * away, axis=0)
     wall_push = params.wall_strength * jnp.exp((radius - wall_dist) / params.wall_range)
     wall_push = jnp.where(wall_valid, wall_push, 0.0)
@@ -275,8 +274,7 @@ def avoid(
     inv = jnp.where(dist > _TINY, 1.0 / jnp.maximum(dist, _TINY), 0.0)
     size = radius[:, None] + pr
     push = jnp.where(valid, params.strength * jnp.exp((size - dist) / params.range), 0.0) * inv
-    front = -(dx * desired[:, 0:1] + dz * desired[:, 1:2]) * inv  # cos φ_ij
-    push = push * (params.anisotropy + (1.0 - params.anisotropy) * 0.5 * (1.0 + front))
+    push = push * _behind_weight(params, -(dx * desired[:, 0:1] + dz * desired[:, 1:2]) * inv)
     ex = desired[:, 0] + jnp.sum(push * dx, axis=1)
     ez = desired[:, 1] + jnp.sum(push * dz, axis=1)
     if motion is not None:
@@ -299,6 +297,12 @@ def avoid(
         gap = jnp.minimum(gap, jnp.min(jnp.where(w_in, wd - radius[:, None], jnp.inf), axis=1))
     v = optimal_velocity(params, speed, gap)
     return jnp.stack([v * ex, v * ez], axis=1), gap
+
+
+def _behind_weight(params: AvoidanceParams, cos: Array) -> Array:
+    """The anisotropy ``λ + (1 − λ)(1 + cos φ_ij)/2`` of a neighbour at bearing ``cos φ_ij``
+    from the desired direction (1 straight ahead, ``λ`` straight behind)."""
+    return params.anisotropy + (1.0 - params.anisotropy) * 0.5 * (1.0 + cos)
 
 
 def _wall_offsets(
