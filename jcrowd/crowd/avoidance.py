@@ -265,9 +265,14 @@ def avoid(
         desired = _slide(params, desired, radius, wx, wz, winv, wd, wvalid)
     all_pos, all_rad = (position, radius) if others is None else others
     n = all_pos.shape[0]
-    px = jnp.concatenate([all_pos[:, 0], jnp.zeros((1,), x.dtype)])[neighbours]
-    pz = jnp.concatenate([all_pos[:, 1], jnp.zeros((1,), z.dtype)])[neighbours]
-    pr = jnp.concatenate([all_rad, jnp.zeros((1,), radius.dtype)])[neighbours]
+    # One gather of each candidate's row [x, z, r (, vx, vz)]: XLA:CPU recomputes the candidate
+    # ids inside every gather it fuses them into, so one gather, not one per column.
+    columns = [all_pos, all_rad[:, None].astype(all_pos.dtype)]
+    if motion is not None:
+        columns.append(motion.crowd.astype(all_pos.dtype))
+    table = jnp.concatenate(columns, axis=1)
+    rows = jnp.concatenate([table, jnp.zeros((1, table.shape[1]), table.dtype)])[neighbours]
+    px, pz, pr = rows[..., 0], rows[..., 1], rows[..., 2]
     valid = neighbours < n
     dx, dz = x[:, None] - px, z[:, None] - pz  # from j to i
     dist = jnp.sqrt(dx * dx + dz * dz)
@@ -278,7 +283,8 @@ def avoid(
     ex = desired[:, 0] + jnp.sum(push * dx, axis=1)
     ez = desired[:, 1] + jnp.sum(push * dz, axis=1)
     if motion is not None:
-        sx, sz = _sideways(params, desired, motion, neighbours, valid, dx, dz, inv, size)
+        vj = (rows[..., 3], rows[..., 4])
+        sx, sz = _sideways(params, desired, motion, vj, valid, dx, dz, inv, size)
         # The reaction time relaxes the direction people choose; walls act at once.
         ex, ez = _react(params, motion, *_unit_xz(ex + sx, ez + sz))
     wpush = params.wall_strength * jnp.exp((radius[:, None] - wd) / params.wall_range)
@@ -353,7 +359,7 @@ def _sideways(
     params: AvoidanceParams,
     desired: Array,
     motion: Motion,
-    neighbours: Array,
+    vj: tuple[Array, Array],
     valid: Array,
     dx: Array,
     dz: Array,
@@ -361,9 +367,9 @@ def _sideways(
     size: Array,
 ) -> tuple[Array, Array]:
     """The anticipatory sideways step ``Σ_j k_ij a_a e^{(ℓ_ij − s^a_ij)/D_a} tanh(…) r_i``
-    (module docstring) on ``(N, M)`` arrays; ``dx, dz`` are ``x_i − x_j``."""
-    crowd = jnp.concatenate([motion.crowd, jnp.zeros((1, 2), motion.crowd.dtype)])
-    vjx, vjz = crowd[:, 0][neighbours], crowd[:, 1][neighbours]  # v_j
+    (module docstring) on ``(N, M)`` arrays; ``dx, dz`` are ``x_i − x_j``, ``vj`` the
+    candidates' velocities."""
+    vjx, vjz = vj
     wx, wz = motion.own[:, 0:1] - vjx, motion.own[:, 1:2] - vjz  # v_i − v_j
     w2 = wx * wx + wz * wz
     closing = -(dx * wx + dz * wz)

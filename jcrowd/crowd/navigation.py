@@ -152,29 +152,70 @@ class Navigation(eqx.Module):
 def field_values(nav: Navigation, target: Int[Array, " N"], x: Array, z: Array) -> Array:
     """Bilinear interpolation of each agent's target field at ``(x, z)`` (clamped to the grid)."""
     g = nav.grid
-    u = jnp.clip((x - g.origin[0]) / g.cell - 0.5, 0.0, g.shape[0] - 1.0)
-    v = jnp.clip((z - g.origin[1]) / g.cell - 0.5, 0.0, g.shape[1] - 1.0)
-    i0 = jnp.minimum(jnp.floor(u), g.shape[0] - 2.0)
-    k0 = jnp.minimum(jnp.floor(v), g.shape[1] - 2.0)
-    fu, fv = u - i0, v - k0
-    i0, k0 = i0.astype(jnp.int32), k0.astype(jnp.int32)
-    f = nav.fields
+    i0, fu = _corner(g.origin[0], g.cell, g.shape[0], x)
+    k0, fv = _corner(g.origin[1], g.cell, g.shape[1], z)
+    nz = g.shape[1]
+    # One flat index per corner: XLA:CPU gathers from a 1-D table several times faster than
+    # with a (target, i, k) index triple.
+    c00 = (target * g.shape[0] + i0) * nz + k0
+    f = nav.fields.reshape(-1)
     return (
-        f[target, i0, k0] * (1 - fu) * (1 - fv)
-        + f[target, i0 + 1, k0] * fu * (1 - fv)
-        + f[target, i0, k0 + 1] * (1 - fu) * fv
-        + f[target, i0 + 1, k0 + 1] * fu * fv
+        f[c00] * (1 - fu) * (1 - fv)
+        + f[c00 + nz] * fu * (1 - fv)
+        + f[c00 + 1] * (1 - fu) * fv
+        + f[c00 + nz + 1] * fu * fv
     )
 
 
 def desired_directions(
     nav: Navigation, target: Int[Array, " N"], position: Float[Array, "N 2"]
 ) -> Float[Array, "N 2"]:
-    """Unit ``−∇D`` of each agent's target field at its position (0 where the field is flat)."""
-    h = 0.5 * nav.grid.cell
+    """Unit ``−∇D`` of each agent's target field at its position (0 where the field is flat):
+    the central difference ``D(x + h) − D(x − h)`` of the bilinear field along each axis,
+    ``h`` half a cell.
+
+    The four bilinear lookups read nodes of one 3 × 3 block of the grid, so the block is read
+    once (9 reads, not 16) and each lookup picks its corners from it.
+    """
+    g = nav.grid
+    h = 0.5 * g.cell
     x, z = position[:, 0], position[:, 1]
-    gx = field_values(nav, target, x + h, z) - field_values(nav, target, x - h, z)
-    gz = field_values(nav, target, x, z + h) - field_values(nav, target, x, z - h)
+    ix = [_corner(g.origin[0], g.cell, g.shape[0], x + d) for d in (-h, 0.0, h)]
+    kz = [_corner(g.origin[1], g.cell, g.shape[1], z + d) for d in (-h, 0.0, h)]
+    # Every lookup's lower corner is the block's first node or the next (floors of points
+    # half a cell apart differ by at most one).
+    a = jnp.minimum(ix[0][0], g.shape[0] - 3)
+    b = jnp.minimum(kz[0][0], g.shape[1] - 3)
+    nz = g.shape[1]
+    flat = nav.fields.reshape(-1)
+    base = (target * g.shape[0] + a) * nz + b
+    block = [[flat[base + i * nz + k] for k in range(3)] for i in range(3)]
+
+    def lookup(i: tuple[Array, Array], k: tuple[Array, Array]) -> Array:
+        (i0, fu), (k0, fv) = i, k
+        di, dk = i0 == a, k0 == b  # lower corner at the block's first row / column
+
+        def node(r: int, c: int) -> Array:
+            row = [jnp.where(di, block[r][q], block[r + 1][q]) for q in (c, c + 1)]
+            return jnp.where(dk, row[0], row[1])
+
+        return (
+            node(0, 0) * (1 - fu) * (1 - fv)
+            + node(1, 0) * fu * (1 - fv)
+            + node(0, 1) * (1 - fu) * fv
+            + node(1, 1) * fu * fv
+        )
+
+    gx = lookup(ix[2], kz[1]) - lookup(ix[0], kz[1])
+    gz = lookup(ix[1], kz[2]) - lookup(ix[1], kz[0])
     norm = jnp.sqrt(gx * gx + gz * gz)
     safe = jnp.maximum(norm, 1e-9)
     return jnp.where(norm[:, None] > 1e-9, -jnp.stack([gx, gz], axis=1) / safe[:, None], 0.0)
+
+
+def _corner(origin: float, cell: float, n: int, x: Array) -> tuple[Array, Array]:
+    """The lower interpolation node along one axis (int32) and the weight of the upper one, as
+    :func:`field_values` clamps them."""
+    u = jnp.clip((x - origin) / cell - 0.5, 0.0, n - 1.0)
+    i0 = jnp.minimum(jnp.floor(u), n - 2.0)
+    return i0.astype(jnp.int32), u - i0
