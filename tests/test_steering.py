@@ -145,3 +145,56 @@ def test_split_over_two_devices_equals_one_device(model):
     np.testing.assert_allclose(out[2]["x"], out[1]["x"], atol=1e-4)
     np.testing.assert_allclose(out[2]["z"], out[1]["z"], atol=1e-4)
     assert jax.device_count() >= 1
+
+
+PATH_SCENE = """
+seed = 1
+duration = 2.0
+fps = 30
+[ground]
+center = [0, 0]
+size = [40, 40]
+[camera]
+eye = [16, 9, -2]
+target = [0, 0, 0]
+[[groups]]
+name = "walkers"
+count = 6
+speed = [1.3, 1.3]
+spawn = {{ shape = "rect", center = [-10, 0], size = [2, 2] }}
+path = {{ waypoints = [[0, 0], [0, 10]], loop = false }}
+[dynamics]
+avoid = {avoid}
+"""
+
+
+@pytest.mark.parametrize("avoid", [True, False])
+def test_a_crowded_waypoint_counts_as_passed_only_past_it_and_within_pass_reach(avoid):
+    """schedule.PASS_REACH: with avoidance, an agent beyond the reach disc but past the
+    waypoint along the next leg (here: north of (0, 0), the next waypoint (0, 10)) and within
+    PASS_REACH reaches moves on; one as far but short of it (south), or beyond PASS_REACH
+    reaches, does not; without avoidance only the reach disc counts. The oracle: the rule's
+    geometry written out by hand for six placed agents."""
+    from jcrowd.crowd.schedule import PASS_REACH, schedule
+
+    text = PATH_SCENE.format(avoid="true" if avoid else "false")
+    sim, state = prepare(parse_scenario(text, "t.toml"), load_default_model())
+    reach = sim.config.reach
+    inside, between, beyond = 0.5 * reach, 0.5 * (1 + PASS_REACH) * reach, 1.2 * PASS_REACH * reach
+    # (x, z) of each agent around the waypoint (0, 0); the next leg runs north (+z).
+    spots = [(0, inside), (0, between), (0, -between), (0, beyond), (between, 0.1), (0, -inside)]
+    want = [True, avoid, False, False, avoid, True]
+    state = _placed(state, spots)
+    new, _ = schedule(sim.crowd, sim.config, state, jnp.ones(6, bool), sim.scene)
+    assert sim.scene is None  # no obstacles: the reach rule, not a navigation target
+    np.testing.assert_array_equal(np.asarray(new.waypoint) == 1, want)
+
+
+def _placed(state, spots):
+    from dataclasses import replace
+
+    x = jnp.asarray([s[0] for s in spots], jnp.float32)
+    z = jnp.asarray([s[1] for s in spots], jnp.float32)
+    # The scenario jitters each agent's waypoints; the test places them exactly.
+    waypoints = jnp.broadcast_to(jnp.asarray([[0.0, 0.0], [0.0, 10.0]]), state.waypoints.shape)
+    return replace(state, x=x, z=z, waypoints=waypoints)
