@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.avoidance import AvoidanceParams, Motion, avoid
+from jcrowd.crowd.avoidance import AvoidanceParams, Motion, avoid_rows, crowd_table
 from jcrowd.crowd.neighbours import CellList, GridSpec, near_places
 
 __all__ = ["BUCKET_DIVISORS", "CANDIDATE_TIERS", "avoid_in_grid"]
@@ -65,29 +65,28 @@ def avoid_in_grid(
     """
     n = position.shape[0]
     pos, rad = others
-    order = cells.order
-    pos_c = jnp.concatenate([pos, jnp.zeros((1, 2), pos.dtype)])[order]  # cell order
-    rad_c = jnp.concatenate([rad, jnp.zeros((1,), rad.dtype)])[order]
+    # The crowd's rows in cell order, then the "no candidate" row: places index it directly.
+    table = crowd_table(pos, rad, None if motion is None else motion.crowd)
+    table = table[jnp.concatenate([cells.order, jnp.full((1,), pos.shape[0], jnp.int32)])]
+    none = cells.order.shape[0]  # the place past the last: no candidate
     own = cells.place[rows]
-    if motion is not None:
-        vel_c = jnp.concatenate([motion.crowd, jnp.zeros((1, 2), motion.crowd.dtype)])[order]
 
     def velocities(sel: Array, near: Array) -> Array:
         moving = None
         if motion is not None:
             dt = motion.dt[sel] if motion.dt.ndim else motion.dt
-            moving = Motion(motion.own[sel], vel_c, dt)
-        v, _ = avoid(
+            moving = Motion(motion.own[sel], motion.crowd, dt)
+        v, _ = avoid_rows(
             params,
             position[sel],
             desired[sel],
             speed[sel],
             radius[sel],
-            near,
+            table[near],
+            near < none,
             walls,
             wall_ids[sel],
-            others=(pos_c, rad_c),
-            motion=moving,
+            moving,
         )
         return v
 

@@ -236,12 +236,18 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         arrays["alive"] = np.arange(agents) < n0
         arrays["agent"] = np.where(np.arange(agents) < n0, np.arange(agents), -1)
         reservoir = init_state(
-            crowd, _state_arrays(scenario, sources, scene is not None), key_sources
+            crowd,
+            _state_arrays(scenario, sources, scene is not None),
+            key_sources,
+            standing=config.avoid,
         )
         per_step = np.bincount(np.floor(times * scenario.fps).astype(np.int64)).max()
         pool = Pool(reservoir, jnp.asarray(times, jnp.float32), n0, int(2 * per_step + 8))
     state = init_state(
-        crowd, arrays, key_slots if pool is not None else jax.random.key(scenario.seed)
+        crowd,
+        arrays,
+        key_slots if pool is not None else jax.random.key(scenario.seed),
+        standing=config.avoid,
     )
     return Simulation(crowd, config, scenario, sp, scene, pool), state
 

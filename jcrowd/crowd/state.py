@@ -210,7 +210,11 @@ class Frame(eqx.Module):
 
 
 def init_state(
-    cm: CrowdModel, spawn: dict[str, Array], key: Array, min_reliability: float = 0.5
+    cm: CrowdModel,
+    spawn: dict[str, Array],
+    key: Array,
+    min_reliability: float = 0.5,
+    standing: bool = False,
 ) -> CrowdState:
     """The first state: every agent on its first clip at a random phase (``key``).
 
@@ -226,6 +230,12 @@ def init_state(
     navigation field, :func:`jcrowd.crowd.scene.build_scene`; default −1: none), and for a pool
     with sources (:mod:`jcrowd.crowd.pool`) ``queue`` ``(N, Q)``, ``agent`` and ``alive``
     ``(N,)`` (defaults: no queue, agent ``i`` in slot ``i``, everyone alive).
+
+    ``standing``: the first velocity is 0, not the free speed along the heading. With the crowd
+    dynamics on, an agent then waits for its first avoidance update: a far agent updating every
+    ``far_every`` steps otherwise walks its first steps blind (measured on the 1M-agent plaza
+    with ``far_every = 4``: 1,300 agents closer than 0.9 (rᵢ + rⱼ), down to 0.46, in the first
+    8 steps).
     """
     n = spawn["position"].shape[0]
     heading = jnp.asarray(spawn["heading"], jnp.float32)
@@ -268,8 +278,8 @@ def init_state(
         loop=jnp.asarray(spawn["loop"], bool),
         waypoint=jnp.zeros(n, jnp.int32),
         field=jnp.asarray(spawn.get("field", np.full(waypoints.shape[:2], -1)), jnp.int32),
-        vx=speed * jnp.sin(heading),
-        vz=speed * jnp.cos(heading),
+        vx=0.0 * speed if standing else speed * jnp.sin(heading),
+        vz=0.0 * speed if standing else speed * jnp.cos(heading),
         radius=jnp.asarray(spawn.get("radius", np.full(n, DEFAULT_RADIUS)), jnp.float32),
         clock=jnp.zeros(n, jnp.float32),
         # One empty column without sources: a zero-width array split over devices comes back
