@@ -90,7 +90,7 @@ def level0_joints(model, rec: dict, agent: int, span: tuple[int, int]):
 
 def measure(model, name: str, steps: int | None) -> dict:
     sim, state = prepare(load_scenario(Path(ROOT) / "examples" / f"{name}.toml"), model)
-    steps = steps or round(sim.scenario.duration * sim.scenario.fps)
+    steps = steps or round(sim.scenario.duration_s * sim.scenario.fps)
     _, rec = simulate(sim, state, steps, "all")
     fps = float(rec["fps"])
     n = rec["position"].shape[1]
