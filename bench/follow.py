@@ -15,9 +15,11 @@ everything (``jcrowd run --record all``), and measures from the recording:
   :func:`jcrowd.model.foot_skate` (``bench/skate.py``'s measure); ``skate_captures_cm_per_frame``
   the same on the ``cmu16`` captures (the default model's data, 30 fps), ``skate_ratio`` the two.
 - ``slow_share``: agent-frames whose simulated speed is below ``SLOW_M_S``;
-  ``standing_share``: agent-frames drawn standing (``0`` while the step has no standing pose);
-  ``standing_skate_cm_per_frame``: the drawn feet of slow agent-frames, each foot's lower joint
-  (ankle or toe) moving horizontally per frame, mean over both feet;
+  ``standing_share``: alive agent-frames standing (the step's ``stands``: the phase waiting at
+  a double-support phase; ``0`` before the step had it);
+  ``standing_skate_cm_per_frame``: the drawn feet of standing agent-frames (of slow ones before
+  the step could stand), each foot's lower joint (ankle or toe) moving horizontally per frame,
+  mean over both feet;
   ``walking_in_place_share``: of the slow agent-frames, those whose gait phase advances at
   half the model's cadence or more (a walk at walking cadence while hardly moving).
 - ``pop_cm`` (p99) and ``pop_ratio`` (p99): at each frame where a drawn agent's level changes,
@@ -113,6 +115,7 @@ def measure(model, name: str, steps: int | None) -> dict:
     head_dev = np.degrees(np.abs(dev[moving]))
 
     slow = both & (speed < SLOW_M_S)
+    standing = alive & rec["stands"] if "stands" in rec else np.zeros_like(alive)
     last = float(sim.crowd.frames - 1)
     dtau = np.remainder(rec["tau"][1:] - rec["tau"][:-1], last)
     cadence = dtau * fps / last  # cycles per second
@@ -122,7 +125,8 @@ def measure(model, name: str, steps: int | None) -> dict:
     # Drawn feet of slow agent-frames: each foot's lower joint, horizontal motion per frame.
     step_feet = []
     d0, d1 = pts[:-1], pts[1:]
-    ok = slow & drawn[:-1] & drawn[1:]
+    still = (standing[:-1] & standing[1:]) if standing.any() else slow
+    ok = still & drawn[:-1] & drawn[1:]
     for ankle, toe in foot_pairs:
         low = np.where(d0[..., ankle, 1] <= d0[..., toe, 1], ankle, toe)
         a = np.take_along_axis(d0, low[..., None, None], axis=2)[..., 0, :]
@@ -164,7 +168,7 @@ def measure(model, name: str, steps: int | None) -> dict:
         "heading_deviation_deg": {"p50": pct(head_dev, 50), "p99": pct(head_dev, 99)},
         "skate_cm_per_frame": round(float(np.mean(skates)), 3),
         "slow_share": round(float(slow.sum() / max(both.sum(), 1)), 4),
-        "standing_share": 0.0,
+        "standing_share": round(float(standing.sum() / max(alive.sum(), 1)), 4),
         "standing_skate_cm_per_frame": round(standing_skate, 3),
         "walking_in_place_share": round(float(in_place.sum() / max(slow.sum(), 1)), 4),
         "level_changes": len(pops),

@@ -30,7 +30,8 @@ every process's devices into one mesh, the agent axis is split over it, each pro
 own block of agents, and process 0 writes the recording. Each process prints its own JSON.
 
 Arrays are named ``position``, ``heading``, ``level``, ``dots``, ``alive``, ``slots_l``,
-``valid_l``, ``points_l``, ``tau``, ``control``, ``control_next``, ``has_next`` plus ``height``,
+``valid_l``, ``points_l``, ``tau``, ``control``, ``control_next``, ``has_next``, ``stands``
+(with the dynamics on: standing at a double-support phase) plus ``height``,
 ``group``, ``color``, ``parents`` (bones to draw), ``obstacles`` (scenarios with walls: their
 prisms, :func:`jcrowd.render.meshes.prism_mesh`), ``eye``/``target`` per step and ``lens``
 (fov, near, far) of the camera, ``fps`` and ``model`` (the model file used)."""
@@ -229,6 +230,7 @@ PER_AGENT = frozenset(
         "control",
         "control_next",
         "has_next",
+        "stands",
         "level",
         "dots",
     )
@@ -261,7 +263,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
             for k in ("slots", "valid", "points"):
                 rec[f"{k}_{lv}"] = []
     if record == "all":
-        for k in ("tau", "control", "control_next", "has_next"):
+        for k in ("tau", "control", "control_next", "has_next", "stands"):
             rec[k] = []
     if sim.pool is not None:
         rec["agent"] = []
@@ -288,6 +290,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
                     control=control,
                     control_next=control_next,
                     has_next=state.has_next,
+                    stands=state.stands,
                 )
             host = _fetch(snapshot)  # before the step takes the state's buffers
             t = time.perf_counter()

@@ -239,7 +239,7 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
             crowd,
             _state_arrays(scenario, sources, scene is not None),
             key_sources,
-            standing=config.avoid,
+            resting=config.avoid,
         )
         per_step = np.bincount(np.floor(times * scenario.fps).astype(np.int64)).max()
         pool = Pool(reservoir, jnp.asarray(times, jnp.float32), n0, int(2 * per_step + 8))
@@ -247,7 +247,7 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         crowd,
         arrays,
         key_slots if pool is not None else jax.random.key(scenario.seed),
-        standing=config.avoid,
+        resting=config.avoid,
     )
     return Simulation(crowd, config, scenario, sp, scene, pool), state
 

@@ -151,6 +151,9 @@ class CrowdState(eqx.Module):
     vx: Float[Array, " N"]  # simulated velocity (m/s) when the step avoids (else the spawn one)
     vz: Float[Array, " N"]
     radius: Float[Array, " N"]  # m, the body disc the crowd dynamics keeps apart
+    # With the dynamics on: the agent stands, its phase waiting at a double-support phase
+    # (jcrowd.crowd.stepping.follow_phase).
+    stands: Bool[Array, " N"]
     # The slot, not its agent (jcrowd.crowd.pool): time since the start (s, the same in every
     # slot), the source agents queued for it (reservoir rows, −1 padding; one −1 column
     # without sources), how many of them it has taken, and the agent it holds (−1: none yet).
@@ -214,7 +217,7 @@ def init_state(
     spawn: dict[str, Array],
     key: Array,
     min_reliability: float = 0.5,
-    standing: bool = False,
+    resting: bool = False,
 ) -> CrowdState:
     """The first state: every agent on its first clip at a random phase (``key``).
 
@@ -231,7 +234,7 @@ def init_state(
     with sources (:mod:`jcrowd.crowd.pool`) ``queue`` ``(N, Q)``, ``agent`` and ``alive``
     ``(N,)`` (defaults: no queue, agent ``i`` in slot ``i``, everyone alive).
 
-    ``standing``: the first velocity is 0, not the free speed along the heading. With the crowd
+    ``resting``: the first velocity is 0, not the free speed along the heading. With the crowd
     dynamics on, an agent then waits for its first avoidance update: a far agent updating every
     ``far_every`` steps otherwise walks its first steps blind (measured on the 1M-agent plaza
     with ``far_every = 4``: 1,300 agents closer than 0.9 (rᵢ + rⱼ), down to 0.46, in the first
@@ -278,9 +281,10 @@ def init_state(
         loop=jnp.asarray(spawn["loop"], bool),
         waypoint=jnp.zeros(n, jnp.int32),
         field=jnp.asarray(spawn.get("field", np.full(waypoints.shape[:2], -1)), jnp.int32),
-        vx=0.0 * speed if standing else speed * jnp.sin(heading),
-        vz=0.0 * speed if standing else speed * jnp.cos(heading),
+        vx=0.0 * speed if resting else speed * jnp.sin(heading),
+        vz=0.0 * speed if resting else speed * jnp.cos(heading),
         radius=jnp.asarray(spawn.get("radius", np.full(n, DEFAULT_RADIUS)), jnp.float32),
+        stands=jnp.zeros(n, bool),
         clock=jnp.zeros(n, jnp.float32),
         # One empty column without sources: a zero-width array split over devices comes back
         # from the compiled step with another sharding and would recompile it every call.

@@ -46,6 +46,12 @@ __all__ = [
 TURN_RATE = 3.0
 """Largest body turn rate (rad/s) when the heading follows the velocity."""
 
+TURN_FULL_SPEED = 0.8
+"""From this speed (m/s) up the body turns at up to :data:`TURN_RATE` (:func:`turn_towards`)."""
+
+TURN_SLOW_SHARE = 0.1
+"""The share of :data:`TURN_RATE` a walker keeps however slowly it moves."""
+
 SELECT_WAYPOINTS = 8
 """Up to this many waypoints per agent, the current one is picked by selects (vectorized);
 longer lists are gathered."""
@@ -178,11 +184,20 @@ def due_rows(
 
 
 def turn_towards(heading: Array, vx: Array, vz: Array, dt: Array, min_speed: float = 0.05) -> Array:
-    """The heading turned towards the velocity's direction by at most ``TURN_RATE·dt``
-    (unchanged while the agent is slower than ``min_speed`` m/s)."""
+    """The heading turned towards the velocity's direction by at most ``TURN_RATE·dt`` times
+    ``clip(speed / TURN_FULL_SPEED, TURN_SLOW_SHARE, 1)`` (unchanged while the agent is slower
+    than ``min_speed`` m/s).
+
+    A slow walker turns slowly: in a dense queue the simulated velocity's direction swings from
+    step to step as neighbours push, and a body chasing it at the full rate swings its planted
+    foot round (measured on the entrance run: the heading turned more than 2° in 80 % of the
+    planted-foot frames, most of them at 0.1–0.5 m/s); people shuffling in a queue sidestep
+    rather than turn.
+    """
     want = jnp.arctan2(vx, vz)  # heading θ faces (sin θ, cos θ)
     diff = jnp.remainder(want - heading + jnp.pi, 2 * jnp.pi) - jnp.pi
-    limit = TURN_RATE * dt
+    speed = jnp.sqrt(vx * vx + vz * vz)
+    limit = TURN_RATE * dt * jnp.clip(speed / TURN_FULL_SPEED, TURN_SLOW_SHARE, 1.0)
     turn = jnp.clip(diff, -limit, limit)
     moving = vx * vx + vz * vz > min_speed * min_speed
     return jnp.where(moving, heading + turn, heading)

@@ -65,9 +65,14 @@ from jcrowd.crowd.synthesis import clip_core, coeffs_at, level_points, pose_from
 from jcrowd.motion.fastmath import sincos
 
 __all__ = [
+    "FOLLOW_MAX_RATE",
+    "STAND_APPROACH",
+    "STAND_BELOW",
     "bucket_chunk",
     "decode_bucket",
     "default_capacities",
+    "follow_phase",
+    "stands_at",
     "step",
 ]
 
@@ -100,6 +105,55 @@ def _smoothstep(x: Array) -> Array:
     return x * x * (3.0 - 2.0 * x)
 
 
+FOLLOW_MAX_RATE = 2.0
+"""With the dynamics on, the phase runs at most this many times its clip's own rate."""
+
+STAND_BELOW = 0.1
+"""With the dynamics on, an agent slower than this (m/s) stands: its phase goes on to the next
+double-support phase and waits there (:func:`follow_phase`)."""
+
+STAND_APPROACH = 0.4
+"""On its way to stand, the phase runs at least this fraction of the clip's own rate."""
+
+
+def follow_phase(
+    cm: CrowdModel, tau: Array, natural: Array, walked: Array, stride: Array, dt: Array
+) -> Array:
+    """The phase step of an agent whose root the simulation moves (issue 19).
+
+    Walking: the aligned frames that carry the clip's root as far as the agent walked this step,
+    ``walked / stride`` with ``stride`` the clip's root travel per aligned frame at the phase
+    (m) — the stance foot then stays where it was planted on a straight walk whatever the
+    simulated speed; between 0 and :data:`FOLLOW_MAX_RATE` times ``natural``, the clip's own
+    step ``dt·fps/ΔA``. Below the slowest captured cycle the stride stays that cycle's and the
+    cadence drops with the speed.
+
+    Standing (slower than :data:`STAND_BELOW`): the phase goes on, at least
+    :data:`STAND_APPROACH` times its own rate, to the clip's next double-support phase
+    (:attr:`~jcrowd.crowd.clips.CrowdModel.double_support`, both heels down) and waits there
+    until the agent walks again: the standing pose is the clip's own double-support frame, and
+    the walk resumes from it.
+    """
+    rate = jnp.clip(walked / jnp.maximum(stride, 1e-4), 0.0, FOLLOW_MAX_RATE * natural)
+    last = float(cm.frames - 1)
+    phases = [*cm.double_support, cm.double_support[0] + last]
+    ahead = jnp.full_like(tau, 2 * last)
+    for p in phases:
+        ahead = jnp.where((p - tau >= -1e-3) & (p - tau < ahead), jnp.maximum(p - tau, 0.0), ahead)
+    towards = jnp.minimum(jnp.maximum(rate, STAND_APPROACH * natural), ahead)
+    slow = walked < STAND_BELOW * dt
+    return jnp.where(slow, jnp.where(ahead <= 1e-3, 0.0, towards), rate)
+
+
+def stands_at(cm: CrowdModel, tau: Array) -> Array:
+    """Whether phase ``tau`` is at one of the clip's double-support phases (within 1e-3)."""
+    last = float(cm.frames - 1)
+    near = jnp.zeros(tau.shape, bool)
+    for p in (*cm.double_support, cm.double_support[0] + last):
+        near = near | (jnp.abs(tau - p) <= 1e-3)
+    return near
+
+
 def _agent_level(
     cm: CrowdModel,
     level: int,
@@ -109,13 +163,15 @@ def _agent_level(
     i: Array,
     dt: Array,
     cached: bool = False,
+    follow: bool = False,
 ):
     """Pose and root motion of agent ``i`` at ``level`` (one agent; batched by ``vmap``).
 
     ``near``: blend into the next clip over the cycle's second half. ``lock``: move the root so
     that the stance foot stays put (see :func:`step`). ``cached``: the core is the agent's
     ``far_core`` (the coarsest level, kept current by
-    :func:`jcrowd.crowd.state.refresh_far_cores`).
+    :func:`jcrowd.crowd.state.refresh_far_cores`). ``follow``: the phase advances with the
+    distance the agent walks (:func:`follow_phase`).
     """
     lv = cm.decoders.levels[level]
     last = float(cm.frames - 1)
@@ -138,6 +194,9 @@ def _agent_level(
     pts = level_points(lv, y, xz, heading, h)
     rates = root_rates(y)
     dtau = dt * cm.decoders.fps / rates.delta_a
+    if follow:
+        walked = jnp.hypot(state.vx[i], state.vz[i]) * dt
+        dtau = follow_phase(cm, tau, dtau, walked, jnp.linalg.norm(rates.velocity) * h, dt)
     dyaw = rates.yaw_rate * dtau
     dpos = local_to_world(rates.velocity * h * dtau, heading)
     if lock:
@@ -202,13 +261,18 @@ def decode_bucket(
 
 
 def _dead_reckoning(
-    cm: CrowdModel, state: CrowdState, dt: Array
+    cm: CrowdModel, state: CrowdState, dt: Array, follow: bool = False
 ) -> tuple[Array, Array, Array, Array]:
-    """Root-only advance ``(dτ, dyaw, dx, dz)`` along the clip's arc at its mean rate."""
+    """Root-only advance ``(dτ, dyaw, dx, dz)`` along the clip's arc at its mean rate (with
+    ``follow``, the phase at the clip's mean stride per aligned frame, :func:`follow_phase`)."""
     ix, iz, iyaw = cm.index[:3]
     last = float(cm.frames - 1)
     control, _, duration = state.clip()
     dtau = dt * cm.decoders.fps * last / jnp.maximum(duration, 1.0)
+    if follow:
+        walked = jnp.hypot(state.vx, state.vz) * dt
+        stride = jnp.hypot(control[:, ix], control[:, iz]) / last
+        dtau = follow_phase(cm, state.tau, dtau, walked, stride, dt)
     frac = dtau / last
     turn = control[:, iyaw]
     half = turn / 2
@@ -258,7 +322,7 @@ def step(
     detailed = visible & (pixels >= config.min_pixels)
     buckets = assign_buckets(min_level, importance, detailed, config.capacities)
 
-    dtau, dyaw, dx, dz = _dead_reckoning(cm, state, dt)
+    dtau, dyaw, dx, dz = _dead_reckoning(cm, state, dt, config.avoid)
     points = []
     for lv, (slots, ok) in enumerate(zip(buckets.slots, buckets.valid, strict=True)):
         safe = jnp.where(ok, slots, 0)
@@ -269,7 +333,7 @@ def step(
             state = refresh_far_cores(cm, state, safe, ok)
 
         def one(i, lv=lv, near=near, lock=lock, cached=cached, state=state):
-            return _agent_level(cm, lv, near, lock, state, i, dt, cached)
+            return _agent_level(cm, lv, near, lock, state, i, dt, cached, config.avoid)
 
         used = jnp.sum(ok, dtype=jnp.int32)
         chunk = bucket_chunk(len(slots), config.chunk, cm.decoders.levels[lv].cores.shape[1])
@@ -324,7 +388,11 @@ def step(
         vx,
         vz,
     )
+    slow = jnp.hypot(state.vx, state.vz) < STAND_BELOW  # the speed the phase followed
     state = eqx.tree_at(lambda s: (s.x, s.z, s.heading, s.tau, s.vx, s.vz), state, moved)
+    if config.avoid:
+        stands = alive & slow & stands_at(cm, state.tau)
+        state = eqx.tree_at(lambda s: s.stands, state, stands)
     state, deferred = schedule(cm, config, state, buckets.level < nlev, scene)
     state = eqx.tree_at(lambda s: s.level, state, buckets.level)
     if pool is not None or config.far_every > 1:
