@@ -210,7 +210,8 @@ def main() -> None:
             f"{r['level_changes']} | {r['pop_cm']} | {r['pop_ratio']} |"
         )
     text = "\n".join(rows) + f"\n\ncmu16 captures' own skate: {ref:.3f} cm/frame"
-    report("follow", f"{out['machine']}, jax {out['jax']}", out, text, args.json, not args.no_record)
+    details = f"{out['machine']}, jax {out['jax']}"
+    report("follow", details, out, text, args.json, not args.no_record)
 
 
 if __name__ == "__main__":
