@@ -1,0 +1,175 @@
+"""Walkers following the simulated crowd (issue 19): the phase follows the distance walked, a
+slow walker stands at a double-support phase, and its feet stay still.
+
+Oracles: the phase rule written out case by case (closed forms); the double-support phases
+against the ankles' separation computed through another path (the level-0 export's pose
+vectors and a plain forward kinematics, not the step's decoder); a standing agent's drawn feet
+read from the frame's points (not from a contact detector) compared with how far its root
+moved.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jcrowd import load_default_model
+from jcrowd.crowd import prepare
+from jcrowd.crowd.export import _pose_vectors
+from jcrowd.crowd.stepping import (
+    FOLLOW_MAX_RATE,
+    STAND_APPROACH,
+    STAND_BELOW,
+    follow_phase,
+    stands_at,
+)
+from jcrowd.motion.clip import joint_positions
+from jcrowd.motion.rotation import quat_from_expmap, quat_mul, quat_normalize
+from jcrowd.scenario import parse_scenario
+
+SCENE = """
+seed = 2
+duration = 4.0
+fps = 30
+[ground]
+center = [0, 0]
+size = [20, 20]
+[camera]
+eye = [0, 2, -8]
+target = [0, 1, 0]
+[[groups]]
+name = "walkers"
+count = 6
+speed = [1.2, 1.4]
+spawn = { shape = "rect", center = [0, 0], size = [4, 2] }
+goal = { shape = "rect", center = [0, 9], size = [8, 1] }
+[dynamics]
+avoid = true
+"""
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_default_model()
+
+
+@pytest.fixture(scope="module")
+def sim_state(model):
+    return prepare(parse_scenario(SCENE, "t.toml"), model)
+
+
+def _oracle(tau, natural, walked, stride, dt, phases, last):
+    """follow_phase case by case, one agent at a time (plain Python floats)."""
+    rate = min(max(walked / max(stride, 1e-4), 0.0), FOLLOW_MAX_RATE * natural)
+    if walked >= STAND_BELOW * dt:
+        return rate
+    ahead = min(p - tau for p in [*phases, phases[0] + last] if p - tau >= -1e-3)
+    ahead = max(ahead, 0.0)
+    if ahead <= 1e-3:
+        return 0.0
+    return min(max(rate, STAND_APPROACH * natural), ahead)
+
+
+def test_phase_follows_the_distance_walked_and_waits_at_double_support(sim_state):
+    sim, _ = sim_state
+    cm = sim.crowd
+    last = float(cm.frames - 1)
+    dt = 1 / 30
+    rng = np.random.default_rng(0)
+    n = 400
+    tau = np.concatenate([[*cm.double_support, last, 0.0], rng.uniform(0, last, n - 4)])
+    natural = rng.uniform(0.5, 1.5, n)
+    # Walking (up to 1.6 m/s), slow and standing still, in equal shares.
+    walked = rng.choice([0.0, 0.5 * STAND_BELOW * dt, 0.01, 0.05], n) * rng.uniform(0, 1, n)
+    walked[:4] = 0.0
+    stride = rng.uniform(0.005, 0.03, n)
+    got = np.asarray(
+        follow_phase(cm, *(jnp.asarray(a, jnp.float32) for a in (tau, natural, walked, stride)), dt)
+    )
+    want = [
+        _oracle(*a, dt, cm.double_support, last)
+        for a in zip(tau, natural, walked, stride, strict=True)
+    ]
+    # float32 phases (≤ 99) against float64: a few ulps of 99.
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-5)
+    # Property: a slow agent never steps past a double-support phase.
+    slow = walked < STAND_BELOW * dt
+    after = tau + got
+    for p in [*cm.double_support, cm.double_support[0] + last]:
+        crossed = slow & (tau < p - 1e-3) & (after > p + 1e-4)
+        assert not crossed.any()
+    # A slow agent sitting on one waits.
+    assert np.all(got[:2] == 0.0) and bool(np.all(stands_at(cm, jnp.asarray(tau[:2]))))
+    jitted = jax.jit(lambda *a: follow_phase(cm, *a, dt))(
+        *(jnp.asarray(a, jnp.float32) for a in (tau, natural, walked, stride))
+    )
+    np.testing.assert_array_equal(np.asarray(jitted), got)
+
+
+def test_double_support_phases_are_where_the_ankles_are_furthest_apart(model, sim_state):
+    """Independent path: the level-0 pose vectors as the BVH export builds them, FK by
+    jcrowd.motion.clip.joint_positions, at every aligned frame of the mean clip."""
+    sim, _ = sim_state
+    cm = sim.crowd
+    last = cm.frames - 1
+    c = np.asarray(cm.sample_controls, np.float64).mean(axis=0)
+    taus = np.arange(last, dtype=np.float64)
+    y = _pose_vectors(model, np.repeat(c[None], last, axis=0), taus)
+    layout, j = model.layout, model.layout.num_joints
+    e = y[:, 7 : 7 + 3 * (j - 1)].reshape(last, j - 1, 3)
+    joints = quat_mul(np.asarray(layout.reference, np.float64)[None, 1:], quat_from_expmap(e))
+    root = quat_from_expmap(y[:, layout.tilt])
+    rot = quat_normalize(np.concatenate([root[:, None], joints], axis=1))
+    from jcrowd.motion.clip import Motion
+
+    motion = Motion(model.skeleton, rot.astype(np.float32), np.zeros((last, 3), np.float32), 30.0)
+    pos = np.asarray(joint_positions(motion))
+    la, _, ra, _ = cm.feet
+    apart = pos[:, la, 2] - pos[:, ra, 2]
+    # The step's phases are integer frames of its own decode: the oracle's extremes must be
+    # there to within a frame, and the separation there within 1 mm of the extreme.
+    first, second = cm.double_support
+    assert apart[int(first)] >= apart.max() - 1e-3
+    assert apart[int(second)] <= apart.min() + 1e-3
+    # Both heel strikes: the feet a step apart each way, half a cycle or so between them.
+    assert apart.max() > 0.05 and apart.min() < -0.05
+    assert 0.3 * last < (second - first) % last < 0.7 * last
+
+
+def test_a_standing_agent_keeps_its_feet_still_and_moves_without_jumps(sim_state):
+    """Free speed 2 cm/s: every agent slows below STAND_BELOW, walks on to a double-support
+    phase and stands. Its drawn feet then move no more than its root creeps (2 cm/s: 0.067 cm
+    per frame) plus 0.01 cm; and on the way no joint jumps more than 8 cm in a frame (the
+    swing foot at STAND_APPROACH of the clip's cadence moves at most ~6 cm per frame)."""
+    sim, state = sim_state
+    state = replace(state, speed=jnp.full_like(state.speed, 0.02))
+    fn = sim.compiled(donate=False)
+    cm = sim.crowd
+    feet = list(cm.feet)
+    prev, prev_stands, standing_frames, worst_jump = None, None, 0, 0.0
+    for i in range(90):
+        new, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
+        drawn = {}
+        for lv in range(len(frame.points)):
+            ok = np.asarray(frame.valid[lv])
+            slots, pts = np.asarray(frame.slots[lv])[ok], np.asarray(frame.points[lv])[ok]
+            for a, p in zip(slots, pts, strict=True):
+                drawn[int(a)] = p
+        stands = np.asarray(state.stands)
+        if prev is not None:
+            for a, p in drawn.items():
+                if a not in prev:
+                    continue
+                move = np.linalg.norm(p - prev[a], axis=-1)
+                worst_jump = max(worst_jump, float(move.max()))
+                if stands[a] and prev_stands[a]:
+                    standing_frames += 1
+                    slide = np.linalg.norm((p - prev[a])[feet][:, [0, 2]], axis=-1)
+                    assert slide.max() <= 0.02 / 30 + 1e-4, (i, a, slide)
+        prev, prev_stands, state = drawn, stands, new
+    assert standing_frames > 100  # 6 agents standing for most of 3 s
+    assert worst_jump < 0.08
