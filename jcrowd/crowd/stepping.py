@@ -31,7 +31,9 @@ continues from phase 0. Far levels switch at the cycle end without blending.
 With ``StepConfig.avoid`` (``[dynamics] avoid = true``) the crowd dynamics move the roots
 instead of step 2's decoded velocity and step 3's dead reckoning (:mod:`jcrowd.crowd.steering`:
 the collision-free speed model among neighbours, the body turning towards the velocity), the
-clips of step 4 follow the simulated velocity, and foot locking is off.
+clips of step 4 follow the simulated velocity, the phase follows the distance walked (below
+0.1 m/s it waits at a double-support phase: the agent stands; :func:`follow_phase`), and foot
+locking is off.
 
 Agents at the end of a non-looped path stop being ``alive`` (they leave the crowd; the count is
 in the frame). Everything has a static shape; no host round trip inside a step.
@@ -390,7 +392,7 @@ def step(
     )
     slow = jnp.hypot(state.vx, state.vz) < STAND_BELOW  # the speed the phase followed
     state = eqx.tree_at(lambda s: (s.x, s.z, s.heading, s.tau, s.vx, s.vz), state, moved)
-    if config.avoid:
+    if config.avoid:  # (without the dynamics nobody stands: ``stands`` stays False)
         stands = alive & slow & stands_at(cm, state.tau)
         state = eqx.tree_at(lambda s: s.stands, state, stands)
     state, deferred = schedule(cm, config, state, buckets.level < nlev, scene)
