@@ -410,9 +410,9 @@ def _sideways(
     rx, rz = -d0z, d0x  # the right of the desired direction (y up)
     front = jnp.maximum(0.0, -(dx * d0x + dz * d0z) * inv)  # k_ij
     # Following: a neighbour walking my way, or standing, is followed, not stepped around.
-    vj = jnp.sqrt(vjx * vjx + vjz * vjz)
+    vj_speed = jnp.sqrt(vjx * vjx + vjz * vjz)
     # (1 − cos)/2 of the angle between v_j and e_i^0, times min(1, ‖v_j‖/_WALKING), in one.
-    front = front * (vj - (vjx * d0x + vjz * d0z)) / (2 * jnp.maximum(vj, _WALKING))
+    front = front * (vj_speed - (vjx * d0x + vjz * d0z)) / (2 * jnp.maximum(vj_speed, _WALKING))
     strength = params.anticipation_strength * jnp.exp((size - s) / params.anticipation_range)
     side = jnp.tanh((px * rx + pz * rz + params.keep_right) / params.side_width)
     k = jnp.sum(jnp.where(valid, front * strength * side, 0.0), axis=1, keepdims=True)
