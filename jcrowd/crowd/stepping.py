@@ -137,10 +137,8 @@ def follow_phase(
     the walk resumes from it.
     """
     rate = jnp.clip(walked / jnp.maximum(stride, 1e-4), 0.0, FOLLOW_MAX_RATE * natural)
-    last = float(cm.frames - 1)
-    phases = [*cm.double_support, cm.double_support[0] + last]
-    ahead = jnp.full_like(tau, 2 * last)
-    for p in phases:
+    ahead = jnp.full_like(tau, 2.0 * (cm.frames - 1))
+    for p in _stand_phases(cm):
         ahead = jnp.where((p - tau >= -1e-3) & (p - tau < ahead), jnp.maximum(p - tau, 0.0), ahead)
     towards = jnp.minimum(jnp.maximum(rate, STAND_APPROACH * natural), ahead)
     slow = walked < STAND_BELOW * dt
@@ -149,11 +147,16 @@ def follow_phase(
 
 def stands_at(cm: CrowdModel, tau: Array) -> Array:
     """Whether phase ``tau`` is at one of the clip's double-support phases (within 1e-3)."""
-    last = float(cm.frames - 1)
     near = jnp.zeros(tau.shape, bool)
-    for p in (*cm.double_support, cm.double_support[0] + last):
+    for p in _stand_phases(cm):
         near = near | (jnp.abs(tau - p) <= 1e-3)
     return near
+
+
+def _stand_phases(cm: CrowdModel) -> tuple[float, ...]:
+    """The double-support phases in increasing order, and the first again one cycle on (a
+    phase about to wrap waits at the cycle's end, which is the next cycle's start)."""
+    return (*cm.double_support, cm.double_support[0] + float(cm.frames - 1))
 
 
 def _agent_level(
