@@ -525,3 +525,80 @@ def test_a_time_per_agent_equals_each_agents_own_step():
     np.testing.assert_allclose(got[0::2], short[0::2], atol=1e-6)
     np.testing.assert_allclose(got[1::2], long_[1::2], atol=1e-6)
     assert np.abs(short - long_).max() > 1e-3  # premise: the time matters
+
+
+def _cap_oracle(pos, vel, radius, walls, horizon):
+    """Each velocity with its speed capped to close at most half the free gap to any other
+    agent (the whole gap to a wall) in ``horizon`` s: float64 loops over every agent and
+    wall, with the closest point and the approach written out as vectors."""
+    out = vel.copy()
+    for i in range(len(pos)):
+        speed = np.hypot(*vel[i])
+        if speed == 0.0:
+            continue
+        e, limit = vel[i] / speed, np.inf
+        for j in range(len(pos)):
+            to_j = pos[j] - pos[i]
+            d = np.hypot(*to_j)
+            if j != i and e @ to_j > 0.0:
+                free = max(0.0, d - radius[i] - radius[j])
+                limit = min(limit, free / 2 / (horizon[i] * (e @ to_j) / d))
+        for a, b in walls:
+            q = a + np.clip(np.dot(pos[i] - a, b - a) / np.dot(b - a, b - a), 0, 1) * (b - a)
+            to_q = q - pos[i]
+            d = np.hypot(*to_q)
+            if e @ to_q > 0.0:
+                limit = min(limit, max(0.0, d - radius[i]) / (horizon[i] * (e @ to_q) / d))
+        out[i] = e * min(speed, limit)
+    return out
+
+
+def _all_candidates(n, n_walls):
+    cand = jnp.asarray([[j for j in range(n) if j != i] for i in range(n)], jnp.int32)
+    return cand, jnp.broadcast_to(jnp.arange(n_walls, dtype=jnp.int32), (n, n_walls))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_horizon_caps_the_speed_as_the_loop_oracle_says(seed):
+    """Agents updated only every few steps (simulation LOD) walk at most as fast as closes
+    half their gap to anyone they walk towards within the horizon; the oracle caps the plain
+    model's float64 velocities (``_oracle``) in a loop."""
+    pos, desired, speed, radius, walls = _scene(12, seed, spread=2.0)
+    horizon = np.random.default_rng(seed).choice([0.1, 0.4], len(pos))  # one per agent
+    plain, _ = _oracle(pos, desired, speed, radius, walls)
+    want = _cap_oracle(pos, plain, radius, walls, horizon)
+    cand, wall_ids = _all_candidates(len(pos), len(walls))
+    f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, walls, horizon)]
+    p = AvoidanceParams()
+    got, _ = avoid(p, *f32[:4], cand, f32[4], wall_ids, horizon=f32[5])
+    jitted, _ = jax.jit(avoid)(p, *f32[:4], cand, f32[4], wall_ids, horizon=f32[5])
+    # float32 against float64, as in test_velocities_equal_the_equations.
+    np.testing.assert_allclose(np.asarray(got), want, atol=2e-5)
+    np.testing.assert_allclose(np.asarray(jitted), np.asarray(got), atol=1e-6)
+    capped = np.hypot(*want.T) < np.hypot(*plain.T) - 1e-3
+    assert capped.any() and (~capped).any()  # premise: the cap binds for some, not all
+
+
+@pytest.mark.parametrize(("seed", "horizon"), [(7, 0.27), (9, 0.27), (6, 0.5)])
+def test_agents_walking_a_capped_velocity_for_the_horizon_never_touch(seed, horizon):
+    """The cap's promise, checked on positions: every agent walks its velocity for the whole
+    horizon at once (as a far agent does between updates: 0.27 s is 8 steps at 30 fps) and
+    no two bodies, nor a body and a wall, overlap afterwards — where without the cap some do
+    (scenes picked so that they do)."""
+    pos, desired, speed, radius, walls = _scene(40, seed, spread=3.0)
+    cand, wall_ids = _all_candidates(len(pos), len(walls))
+    f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, walls)]
+    p = AvoidanceParams()
+
+    def closest(v):
+        after = pos + np.asarray(v, np.float64) * horizon
+        d = np.linalg.norm(after[:, None] - after[None], axis=-1) + np.eye(len(pos)) * 9
+        bodies = np.min(d / (radius[:, None] + radius[None]))
+        wall = min(after[:, 1].min() + 3.5, 3.6 - after[:, 0].max()) - radius.max()
+        return bodies, wall
+
+    capped, _ = avoid(p, *f32[:4], cand, f32[4], wall_ids, horizon=jnp.float32(horizon))
+    bodies, wall = closest(capped)
+    assert bodies >= 1.0 - 1e-5 and wall >= -1e-5  # float32 positions of a few metres
+    plain, _ = avoid(p, *f32[:4], cand, f32[4], wall_ids)
+    assert closest(plain)[0] < 1.0  # premise: uncapped, someone walks into someone

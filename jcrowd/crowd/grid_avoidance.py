@@ -48,6 +48,7 @@ def avoid_in_grid(
     walls: Float[Array, "S 2 2"],
     wall_ids: Int[Array, "n W"],
     motion: Motion | None = None,
+    horizon: Float[Array, "*n"] | None = None,
 ) -> Float[Array, "n 2"]:
     """:func:`avoid` for agents whose neighbours are the crowd in ``cells``, reading only as
     many candidates as each agent has. Agents not alive get velocity 0. With ``motion``
@@ -59,7 +60,9 @@ def avoid_in_grid(
     Everyone is first evaluated with the first :data:`CANDIDATE_TIERS` ``[0]`` candidates; an
     agent with that many or more is evaluated again with the next tier's count (the last tier
     holds nine full cells), in the smallest bucket of :data:`BUCKET_DIVISORS` that holds all
-    such agents, or all agents at that tier when none does (one branch runs). Same
+    such agents, or all agents at that tier when none does (one branch runs). ``horizon``:
+    as :func:`~jcrowd.crowd.avoidance.avoid`'s (the speed cap of agents updated only every
+    few steps). Same
     velocities as :func:`avoid` with :func:`~jcrowd.crowd.neighbours.candidates`, but for the
     order of the sums.
     """
@@ -76,6 +79,7 @@ def avoid_in_grid(
         if motion is not None:
             dt = motion.dt[sel] if motion.dt.ndim else motion.dt
             moving = Motion(motion.own[sel], motion.crowd, dt)
+        h = None if horizon is None else (horizon[sel] if jnp.ndim(horizon) else horizon)
         v, _ = avoid_rows(
             params,
             position[sel],
@@ -87,6 +91,7 @@ def avoid_in_grid(
             walls,
             wall_ids[sel],
             moving,
+            h,
         )
         return v
 

@@ -103,7 +103,10 @@ def steer(
 
     ``due`` (simulation level of detail): the rows whose velocity is computed this step, a
     fixed-size index array (``n`` pads it); the others keep their ``previous`` velocity
-    ``(vx, vz)``. Every agent is still everyone's neighbour at its current position.
+    ``(vx, vz)``. Every agent is still everyone's neighbour at its current position. An agent
+    computed here walks its velocity until its next update, ``dt`` s (one per agent), so its
+    speed is capped to close at most half its gap to any neighbour in that time
+    (:func:`~jcrowd.crowd.avoidance.approach_cap`).
 
     ``anticipate``: agents predict their neighbours' paths from the ``previous`` velocities
     (which the gather then also carries: 24 bytes per agent instead of 16) and relax their
@@ -123,11 +126,13 @@ def steer(
     if anticipate:
         elapsed = jnp.broadcast_to(jnp.asarray(dt, x.dtype), (n,))
         motion = Motion(jnp.stack([px, pz], axis=1), every[:, 4:6], elapsed)
+    horizon = None
     if due is not None:
         sel = jnp.where(due < n, due, 0)
         in_sel = alive[sel] & (due < n)
         x, z, tx, tz, speed, radius, rows = (a[sel] for a in (x, z, tx, tz, speed, radius, rows))
         field = None if field is None else field[sel]
+        horizon = jnp.broadcast_to(jnp.asarray(dt, x.dtype), (n,))[sel]
         if motion is not None:
             motion = Motion(motion.own[sel], motion.crowd, motion.dt[sel])
     else:
@@ -160,6 +165,7 @@ def steer(
         walls,
         wall_ids,
         motion,
+        horizon,
     )
     vx, vz = velocity[:, 0], velocity[:, 1]
     if due is not None:
