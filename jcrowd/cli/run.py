@@ -4,10 +4,12 @@ The step is compiled once (timed apart as ``compile_s``) and then run ``--steps`
 ``--seconds`` of scenario time; default: the scenario's duration), one host copy of what is
 recorded per step. ``recompiles`` counts compilations after the first (0 is the contract);
 ``crowding_max`` the most agents the crowd dynamics' neighbour grid could not hold in any step
-(0 without ``[dynamics] avoid``); ``spawned``, ``exited`` (reached a goal or the end of an open
-path and left) and ``alive_end`` count agents; ``agents`` is the number of slots (with
-``[[sources]]``: the pool, :mod:`jcrowd.crowd.pool`), and ``spawn_late`` the source agents due
-by the end that still wait for a free slot.
+(0 without ``[dynamics] avoid``); ``unblended_changes`` the level changes shown at once
+because the step's blend buckets were full (:mod:`jcrowd.crowd.level_blend`); ``spawned``,
+``exited`` (reached a goal or the end of an open path and left) and ``alive_end`` count
+agents; ``agents`` is the number of slots (with ``[[sources]]``: the pool,
+:mod:`jcrowd.crowd.pool`), and ``spawn_late`` the source agents due by the end that still wait
+for a free slot.
 
 Recording (``--out run.npz``, written atomically):
 
@@ -268,7 +270,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
     if sim.pool is not None:
         rec["agent"] = []
     times, hist = [], np.zeros(nlev + 1, np.int64)
-    overflow = deferred = dots = crowding = 0
+    overflow = deferred = dots = crowding = unblended = 0
     with Progress(console=Console(file=sys.stderr), transient=True) as bar:
         task = bar.add_task(f"{n:,} agents", total=steps)
         for i in range(steps):
@@ -303,6 +305,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
                 "overflow": frame.overflow,
                 "deferred": frame.deferred,
                 "crowding": frame.crowding,
+                "unblended": frame.unblended,
             }
             if record != "roots":
                 parts.update(
@@ -318,6 +321,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
             overflow += int(host.pop("overflow"))
             deferred += int(host.pop("deferred"))
             crowding = max(crowding, int(host.pop("crowding")))
+            unblended += int(host.pop("unblended"))
             for key, value in host.items():
                 rec[key].append(value)
             hist += np.bincount(np.asarray(host["level"]), minlength=nlev + 1)
@@ -350,6 +354,7 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
         "overflow_per_step": overflow / steps,
         "deferred_clips": deferred,
         "crowding_max": crowding,
+        "unblended_changes": unblended,
         "alive_end": int(np.sum(_fetch(state.alive))),
     }
     # Agents placed at t = 0 plus those [[sources]] added (each slot counts the agents it has

@@ -162,14 +162,17 @@ def split_step(
             jnp.where(ok, s * k + device, n_local * k).astype(s.dtype)
             for s, ok in zip(frame.slots, frame.valid, strict=True)
         )
-        # The three counters cross devices in one collective (each is a rendezvous of every
+        # The four counters cross devices in one collective (each is a rendezvous of every
         # device), ordered after the positions' gather.
-        counters = jnp.stack([frame.overflow, frame.deferred, frame.crowding]).astype(jnp.int32)
+        counters = jnp.stack(
+            [frame.overflow, frame.deferred, frame.crowding, frame.unblended]
+        ).astype(jnp.int32)
         if gathered:
             counters, _ = jax.lax.optimization_barrier((counters, gathered))
-        every = jax.lax.all_gather(counters, "agents")  # (K, 3)
+        every = jax.lax.all_gather(counters, "agents")  # (K, 4)
         # Every device sorted the whole crowd into the grid: its crowding is already the total.
         overflow, deferred, crowding = every[:, 0].sum(), every[:, 1].sum(), every[:, 2].max()
+        unblended = every[:, 3].sum()
         return new, Frame(
             slots,
             frame.valid,
@@ -179,12 +182,13 @@ def split_step(
             overflow.astype(frame.overflow.dtype),
             deferred.astype(frame.deferred.dtype),
             crowding.astype(frame.crowding.dtype),
+            unblended.astype(frame.unblended.dtype),
         )
 
     agents, same = P("agents"), P()
     nlev = len(config.capacities)
     per_level = (agents,) * nlev
-    frame_spec = Frame(per_level, per_level, per_level, agents, agents, same, same, same)  # type: ignore[arg-type]
+    frame_spec = Frame(per_level, per_level, per_level, agents, agents, same, same, same, same)  # type: ignore[arg-type]
     mapped = shard_map(
         local,
         mesh=mesh,

@@ -154,6 +154,11 @@ class CrowdState(eqx.Module):
     # With the dynamics on: the agent stands, its phase waiting at a double-support phase
     # (jcrowd.crowd.stepping.follow_phase).
     stands: Bool[Array, " N"]
+    # Level changes ease in (jcrowd.crowd.level_blend): the level drawn in the last frame and
+    # the level being blended from (L: none), with the blend's seconds left.
+    shown: Int[Array, " N"]
+    blend_from: Int[Array, " N"]
+    blend_left: Float[Array, " N"]
     # The slot, not its agent (jcrowd.crowd.pool): time since the start (s, the same in every
     # slot), the source agents queued for it (reservoir rows, −1 padding; one −1 column
     # without sources), how many of them it has taken, and the agent it holds (−1: none yet).
@@ -199,7 +204,8 @@ class Frame(eqx.Module):
     ``min_pixels`` or beyond the budget): a renderer draws them at their root. ``overflow``
     counts agents placed coarser than their distance allows (dots by budget included),
     ``deferred`` agents whose next-clip choice waits a step, ``crowding`` agents the
-    dynamics' neighbour grid could not hold (0 when the step does not avoid).
+    dynamics' neighbour grid could not hold (0 when the step does not avoid), ``unblended``
+    agents whose level change showed at once (:mod:`jcrowd.crowd.level_blend`).
     """
 
     slots: tuple[Int[Array, " C"], ...]
@@ -210,6 +216,7 @@ class Frame(eqx.Module):
     overflow: Int[Array, ""]
     deferred: Int[Array, ""]
     crowding: Int[Array, ""]
+    unblended: Int[Array, ""]
 
 
 def init_state(
@@ -285,6 +292,9 @@ def init_state(
         vz=0.0 * speed if resting else speed * jnp.cos(heading),
         radius=jnp.asarray(spawn.get("radius", np.full(n, DEFAULT_RADIUS)), jnp.float32),
         stands=jnp.zeros(n, bool),
+        shown=jnp.full(n, len(cm.decoders.levels), jnp.int32),
+        blend_from=jnp.full(n, len(cm.decoders.levels), jnp.int32),
+        blend_left=jnp.zeros(n, jnp.float32),
         clock=jnp.zeros(n, jnp.float32),
         # One empty column without sources: a zero-width array split over devices comes back
         # from the compiled step with another sharding and would recompile it every call.

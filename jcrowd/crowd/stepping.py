@@ -28,6 +28,9 @@ phase-aligned reading is taken: over the old cycle's second half the pose eases 
 from the old clip to the new clip *at the same phase*, and at the cycle end the new clip
 continues from phase 0. Far levels switch at the cycle end without blending.
 
+An agent whose level changes eases from the old level's pose to the new one's over 0.3 s
+(:mod:`jcrowd.crowd.level_blend`): the renderer and recordings see the eased pose.
+
 With ``StepConfig.avoid`` (``[dynamics] avoid = true``) the crowd dynamics move the roots
 instead of step 2's decoded velocity and step 3's dead reckoning (:mod:`jcrowd.crowd.steering`:
 the collision-free speed model among neighbours, the body turning towards the velocity), the
@@ -50,6 +53,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Int
 
 from jcrowd.crowd.clips import CrowdModel, local_to_world
+from jcrowd.crowd.level_blend import blend_levels, blend_plan
 from jcrowd.crowd.lod import (
     CameraView,
     assign_buckets,
@@ -349,6 +353,21 @@ def step(
         dx = dx.at[slots].set(pos_l[:, 0], mode="drop")
         dz = dz.at[slots].set(pos_l[:, 1], mode="drop")
 
+    source, left = blend_plan(
+        state.shown, state.blend_from, state.blend_left, buckets.level, state.alive, nlev
+    )
+
+    def old_pose(a: int, ids: Array, used: Array, state: CrowdState = state) -> Array:
+        near = a <= config.blend_max_level
+        safe = jnp.where(ids < state.num_agents, ids, 0)
+
+        def one(i: Array) -> Array:
+            return _agent_level(cm, a, near, False, state, i, dt, follow=config.avoid)[0]
+
+        chunk = bucket_chunk(ids.shape[0], config.chunk, cm.decoders.levels[a].cores.shape[1])
+        return decode_bucket(jax.vmap(one), safe, used, chunk)
+
+    eased, unblended = blend_levels(points, buckets.slots, source, left, old_pose)
     alive = state.alive
     crowding = jnp.zeros((), jnp.int32)
     if config.avoid:
@@ -399,17 +418,21 @@ def step(
         stands = alive & slow & stands_at(cm, state.tau)
         state = eqx.tree_at(lambda s: s.stands, state, stands)
     state, deferred = schedule(cm, config, state, buckets.level < nlev, scene)
+    shown = jnp.where(alive, buckets.level, nlev)
+    blend = (shown, source, jnp.maximum(left - dt, 0.0))
+    state = eqx.tree_at(lambda s: (s.shown, s.blend_from, s.blend_left), state, blend)
     state = eqx.tree_at(lambda s: s.level, state, buckets.level)
     if pool is not None or config.far_every > 1:
         state = eqx.tree_at(lambda s: s.clock, state, state.clock + dt)
     frame = Frame(
         buckets.slots,
         buckets.valid,
-        tuple(points),
+        eased,
         buckets.level,
         visible & (buckets.level == nlev),
         buckets.overflow + buckets.unplaced,
         deferred,
         crowding,
+        unblended,
     )
     return state, frame
