@@ -16,7 +16,13 @@ import numpy as np
 import pytest
 
 from jcrowd.crowd import stepping
-from jcrowd.crowd.level_blend import BLEND_SECONDS, blend_capacity, blend_levels, blend_plan
+from jcrowd.crowd.level_blend import (
+    BLEND_SECONDS,
+    BlendRows,
+    blend_capacity,
+    blend_levels,
+    blend_plan,
+)
 
 W = BLEND_SECONDS
 
@@ -186,9 +192,10 @@ def _drawn_run(model, steps):
     return np.stack(out), np.stack(levels), np.stack(stands), sim.dt
 
 
-def _no_blend(points, slots, source, left, decode):
-    """The step's blend switched off: every level's points as decoded."""
-    return tuple(points), jnp.zeros((), jnp.int32)
+def _no_blend(slots, source, left, decode):
+    """The step's blend switched off: nobody has a pose to blend from."""
+    n = source.shape[0]
+    return BlendRows(jnp.zeros((1, 1, 3)), jnp.zeros(1), jnp.zeros(n, jnp.int32)), jnp.int32(0)
 
 
 def test_a_level_change_in_the_step_eases_from_the_old_pose_to_the_new(monkeypatch):
@@ -203,7 +210,7 @@ def test_a_level_change_in_the_step_eases_from_the_old_pose_to_the_new(monkeypat
     model = load_default_model()
     steps = 100
     blended, levels, stands, dt = _drawn_run(model, steps)
-    monkeypatch.setattr(stepping, "blend_levels", _no_blend)
+    monkeypatch.setattr(stepping, "blend_sources", _no_blend)
     raw, raw_levels, _, _ = _drawn_run(model, steps)
     np.testing.assert_array_equal(levels, raw_levels)  # the blend moves nobody
     change = np.flatnonzero(np.any(levels[1:] != levels[:-1], axis=1)) + 1

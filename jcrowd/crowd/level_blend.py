@@ -28,11 +28,19 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-__all__ = ["BLEND_SECONDS", "blend_capacity", "blend_levels", "blend_plan"]
+__all__ = [
+    "BLEND_SECONDS",
+    "BlendRows",
+    "blend_capacity",
+    "blend_levels",
+    "blend_plan",
+    "blend_sources",
+]
 
 BLEND_SECONDS = 0.3
 """How long a level change eases in (s); the issue asks for 0.2–0.3 s."""
@@ -41,7 +49,7 @@ BLEND_SECONDS = 0.3
 def blend_capacity(capacity: int) -> int:
     """Old-level poses decoded per step for agents that left a level of ``capacity`` slots:
     an eighth of it, at least 64 (never more than the level holds)."""
-    return min(capacity, max(64, capacity // 8))
+    return min(capacity, 64)
 
 
 def blend_plan(
@@ -65,6 +73,68 @@ def blend_plan(
     return jnp.where(active, source, levels), jnp.where(active, left, 0.0)
 
 
+class BlendRows(eqx.Module):
+    """The poses agents blend from this frame: ``old (K + 1, P, 3)`` decoded at the level each
+    left, ``weight (K + 1,)`` its ``w``, and ``row (N,)`` each agent's row (``K``, a zero row
+    with weight 0, for agents not blending)."""
+
+    old: Float[Array, "K1 P 3"]
+    weight: Float[Array, " K1"]
+    row: Int[Array, " N"]
+
+    def ease(self, agent: Int[Array, ""], points: Float[Array, "P 3"]) -> Float[Array, "P 3"]:
+        """One agent's drawn points: ``w·p_from + (1 − w)·points`` (``points`` when it does
+        not blend)."""
+        k = self.row[agent]
+        return points + self.weight[k] * (self.old[k] - points)
+
+
+def blend_sources(
+    slots: Sequence[Int[Array, " C"]],
+    source: Int[Array, " N"],
+    left: Float[Array, " N"],
+    decode: Callable[[int, Int[Array, " K"], Array], Float[Array, "K P 3"]],
+) -> tuple[BlendRows, Int[Array, ""]]:
+    """The old-level poses of the agents blending this frame, decoded once per source level.
+
+    ``slots``: each level's agent ids this frame (``N`` pads them); blending agents are
+    drawn, so they are looked for among the slots, not the whole crowd. ``decode(a, ids,
+    used)`` returns agents ``ids`` (padded with ``N``; the first ``used`` are real) decoded at
+    level ``a``. Returns the rows and how many blending agents did not fit their source
+    level's bucket (:func:`blend_capacity`; they show their level at once). The step eases
+    each agent in its own level's decode (:meth:`BlendRows.ease`), so no level's points are
+    copied for the few that blend.
+    """
+    n, levels = source.shape[0], len(slots)
+    sizes = [int(ids.shape[0]) for ids in slots]
+    total = sum(sizes)
+    ids_at = jnp.concatenate([*slots, jnp.full((1,), n, jnp.int32)])
+    src = jnp.where(ids_at < n, source[jnp.minimum(ids_at, n - 1)], levels)
+    # The blending places first (one compaction of the slots), then each source level's.
+    budget = [blend_capacity(c) for c in sizes]
+    any_src = src < levels
+    (blending,) = jnp.nonzero(any_src, size=min(total, sum(budget)), fill_value=total)
+    unblended = jnp.maximum(jnp.sum(any_src, dtype=jnp.int32) - blending.shape[0], 0)
+    src_b = jnp.concatenate([src, jnp.full((1,), levels, src.dtype)])[blending]
+    padded = jnp.concatenate([blending, jnp.full((1,), total, blending.dtype)])
+    olds, ids_all = [], []
+    for a in range(levels):
+        mask = src_b == a
+        (k,) = jnp.nonzero(mask, size=budget[a], fill_value=blending.shape[0])
+        count = jnp.sum(mask, dtype=jnp.int32)
+        unblended = unblended + jnp.maximum(count - budget[a], 0)
+        ids = ids_at[padded[k]]
+        olds.append(decode(a, ids, jnp.minimum(count, budget[a])))
+        ids_all.append(ids)
+    ids = jnp.concatenate(ids_all)
+    rows = ids.shape[0]
+    old = jnp.concatenate([*olds, jnp.zeros((1, *olds[0].shape[1:]), olds[0].dtype)])
+    weight = jnp.concatenate([left[jnp.minimum(ids, n - 1)] / BLEND_SECONDS, jnp.zeros(1)])
+    weight = jnp.where(jnp.concatenate([ids < n, jnp.zeros(1, bool)]), weight, 0.0)
+    row = jnp.full(n, rows, jnp.int32).at[ids].set(jnp.arange(rows, dtype=jnp.int32), mode="drop")
+    return BlendRows(old, weight.astype(old.dtype), row), unblended
+
+
 def blend_levels(
     points: Sequence[Float[Array, "C P 3"]],
     slots: Sequence[Int[Array, " C"]],
@@ -72,39 +142,14 @@ def blend_levels(
     left: Float[Array, " N"],
     decode: Callable[[int, Int[Array, " K"], Array], Float[Array, "K P 3"]],
 ) -> tuple[tuple[Float[Array, "C P 3"], ...], Int[Array, ""]]:
-    """Each level's points with the blending agents' poses eased from their ``source`` level.
-
-    ``slots``: each level's agent ids (``N`` pads them); ``decode(a, ids, used)`` returns
-    agents ``ids`` (padded with ``N``; the first ``used`` are real) decoded at level ``a``.
-    Blending agents are drawn, so they are looked for among the slots, not the whole crowd.
-    Returns the points and how many blending agents did not fit their source level's bucket
-    (:func:`blend_capacity`; they show their level at once).
-    """
-    n, levels = source.shape[0], len(points)
-    sizes = [int(ids.shape[0]) for ids in slots]
-    total = sum(sizes)
-    # Per place in the levels' slots one after the other: its level and its slot there
-    # (one past the end: the padding place).
-    level_of = np.concatenate([np.full(c, b, np.int32) for b, c in enumerate(sizes)] + [[-1]])
-    slot_of = np.concatenate([np.arange(c, dtype=np.int32) for c in sizes] + [[0]])
-    ids_at = jnp.concatenate([*slots, jnp.full((1,), n, jnp.int32)])
-    src = jnp.where(ids_at < n, source[jnp.minimum(ids_at, n - 1)], levels)
-    out = list(points)
-    unblended = jnp.zeros((), jnp.int32)
-    for a in range(levels):
-        mask = src == a
-        size = blend_capacity(sizes[a])
-        (place,) = jnp.nonzero(mask, size=size, fill_value=total)
-        count = jnp.sum(mask, dtype=jnp.int32)
-        unblended = unblended + jnp.maximum(count - size, 0)
-        ids = ids_at[place]
-        old = decode(a, ids, jnp.minimum(count, size))
-        w = (left[jnp.minimum(ids, n - 1)] / BLEND_SECONDS)[:, None, None]
-        lev, slot = jnp.asarray(level_of)[place], jnp.asarray(slot_of)[place]
-        for b in range(levels):
-            if b == a:
-                continue
-            at = jnp.where(lev == b, slot, sizes[b])
-            now = out[b][jnp.minimum(at, sizes[b] - 1)]
-            out[b] = out[b].at[at].set(now + w * (old - now), mode="drop")
-    return tuple(out), unblended
+    """Each level's points with the blending agents' poses eased from their ``source`` level
+    (:func:`blend_sources`, then :meth:`BlendRows.ease` on every slot): what the step draws,
+    for points decoded without the blend."""
+    rows, unblended = blend_sources(slots, source, left, decode)
+    n = source.shape[0]
+    eased = []
+    for ids, pts in zip(slots, points, strict=True):
+        safe = jnp.where(ids < n, ids, 0)
+        out = jax.vmap(rows.ease)(safe, pts)
+        eased.append(jnp.where((ids < n)[:, None, None], out, pts))
+    return tuple(eased), unblended

@@ -53,7 +53,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Int
 
 from jcrowd.crowd.clips import CrowdModel, local_to_world
-from jcrowd.crowd.level_blend import blend_levels, blend_plan
+from jcrowd.crowd.level_blend import blend_plan, blend_sources
 from jcrowd.crowd.lod import (
     CameraView,
     assign_buckets,
@@ -331,28 +331,6 @@ def step(
     detailed = visible & (pixels >= config.min_pixels)
     buckets = assign_buckets(min_level, importance, detailed, config.capacities)
 
-    dtau, dyaw, dx, dz = _dead_reckoning(cm, state, dt, config.avoid)
-    points = []
-    for lv, (slots, ok) in enumerate(zip(buckets.slots, buckets.valid, strict=True)):
-        safe = jnp.where(ok, slots, 0)
-        near = lv <= config.blend_max_level
-        lock = near and config.foot_lock and not config.avoid
-        cached = lv == nlev - 1 and not near
-        if cached:
-            state = refresh_far_cores(cm, state, safe, ok)
-
-        def one(i, lv=lv, near=near, lock=lock, cached=cached, state=state):
-            return _agent_level(cm, lv, near, lock, state, i, dt, cached, config.avoid)
-
-        used = jnp.sum(ok, dtype=jnp.int32)
-        chunk = bucket_chunk(len(slots), config.chunk, cm.decoders.levels[lv].cores.shape[1])
-        pts, t_l, yaw_l, pos_l = decode_bucket(jax.vmap(one), safe, used, chunk)
-        points.append(pts)
-        dtau = dtau.at[slots].set(t_l, mode="drop")
-        dyaw = dyaw.at[slots].set(yaw_l, mode="drop")
-        dx = dx.at[slots].set(pos_l[:, 0], mode="drop")
-        dz = dz.at[slots].set(pos_l[:, 1], mode="drop")
-
     source, left = blend_plan(
         state.shown, state.blend_from, state.blend_left, buckets.level, state.alive, nlev
     )
@@ -367,7 +345,31 @@ def step(
         chunk = bucket_chunk(ids.shape[0], config.chunk, cm.decoders.levels[a].cores.shape[1])
         return decode_bucket(jax.vmap(one), safe, used, chunk)
 
-    eased, unblended = blend_levels(points, buckets.slots, source, left, old_pose)
+    blend, unblended = blend_sources(buckets.slots, source, left, old_pose)
+
+    dtau, dyaw, dx, dz = _dead_reckoning(cm, state, dt, config.avoid)
+    points = []
+    for lv, (slots, ok) in enumerate(zip(buckets.slots, buckets.valid, strict=True)):
+        safe = jnp.where(ok, slots, 0)
+        near = lv <= config.blend_max_level
+        lock = near and config.foot_lock and not config.avoid
+        cached = lv == nlev - 1 and not near
+        if cached:
+            state = refresh_far_cores(cm, state, safe, ok)
+
+        def one(i, lv=lv, near=near, lock=lock, cached=cached, state=state):
+            pts, *motion = _agent_level(cm, lv, near, lock, state, i, dt, cached, config.avoid)
+            return (blend.ease(i, pts), *motion)
+
+        used = jnp.sum(ok, dtype=jnp.int32)
+        chunk = bucket_chunk(len(slots), config.chunk, cm.decoders.levels[lv].cores.shape[1])
+        pts, t_l, yaw_l, pos_l = decode_bucket(jax.vmap(one), safe, used, chunk)
+        points.append(pts)
+        dtau = dtau.at[slots].set(t_l, mode="drop")
+        dyaw = dyaw.at[slots].set(yaw_l, mode="drop")
+        dx = dx.at[slots].set(pos_l[:, 0], mode="drop")
+        dz = dz.at[slots].set(pos_l[:, 1], mode="drop")
+
     alive = state.alive
     crowding = jnp.zeros((), jnp.int32)
     if config.avoid:
@@ -419,15 +421,15 @@ def step(
         state = eqx.tree_at(lambda s: s.stands, state, stands)
     state, deferred = schedule(cm, config, state, buckets.level < nlev, scene)
     shown = jnp.where(alive, buckets.level, nlev)
-    blend = (shown, source, jnp.maximum(left - dt, 0.0))
-    state = eqx.tree_at(lambda s: (s.shown, s.blend_from, s.blend_left), state, blend)
+    blending = (shown, source, jnp.maximum(left - dt, 0.0))
+    state = eqx.tree_at(lambda s: (s.shown, s.blend_from, s.blend_left), state, blending)
     state = eqx.tree_at(lambda s: s.level, state, buckets.level)
     if pool is not None or config.far_every > 1:
         state = eqx.tree_at(lambda s: s.clock, state, state.clock + dt)
     frame = Frame(
         buckets.slots,
         buckets.valid,
-        eased,
+        tuple(points),
         buckets.level,
         visible & (buckets.level == nlev),
         buckets.overflow + buckets.unplaced,
