@@ -285,3 +285,33 @@ def test_render_on_two_cpu_devices(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr[-2000:]
     assert json.loads(done.stdout)["frames"] == 2
     assert sorted(p.name for p in out.iterdir()) == ["frame_00000.png", "frame_00001.png"]
+
+
+def test_render_a_scenario_from_a_camera_of_ones_own(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--eye/--target see the scene from a fixed close-up camera: the walkers fill far more of
+    the frame than from the scenario's camera 25 m away; one without the other is an error."""
+    import imageio.v3 as iio
+
+    scene = tmp_path / "small.toml"
+    scene.write_text(SMALL)
+    shares = []
+    for extra in ([], ["--eye", "0,1.6,-10", "--target", "0,1,-5"]):
+        out = tmp_path / f"f{len(extra)}"
+        code, _ = _json(
+            capsys, ["render", str(scene), "--out", str(out), "--frames", "1", "--json", *extra]
+        )
+        assert code == 0
+        img = iio.imread(sorted(out.glob("*.png"))[0]).astype(int)
+        # Walkers are drawn in saturated level colours; the ground and sky are greys.
+        shares.append(np.mean(img.max(axis=-1) - img.min(axis=-1) > 60))
+    assert shares[1] > 3 * shares[0] > 0, shares
+    code = main(["render", str(scene), "--out", str(tmp_path / "x"), "--eye", "0,1,-10"])
+    assert code != 0
+    assert "--eye and --target" in capsys.readouterr().err
+    code = main(
+        ["render", str(scene), "--out", str(tmp_path / "x"), "--eye", "0,1", "--target", "0,1,0"]
+    )
+    assert code != 0
+    assert "expected X,Y,Z" in capsys.readouterr().err

@@ -195,7 +195,8 @@ def _drawn_run(model, steps):
 def _no_blend(slots, source, left, decode):
     """The step's blend switched off: nobody has a pose to blend from."""
     n = source.shape[0]
-    return BlendRows(jnp.zeros((1, 1, 3)), jnp.zeros(1), jnp.zeros(n, jnp.int32)), jnp.int32(0)
+    rows = BlendRows(jnp.zeros((1, 1, 3)), jnp.zeros(1), jnp.zeros(n, jnp.int32), jnp.full(1, -1))
+    return rows, jnp.int32(0)
 
 
 def test_a_level_change_in_the_step_eases_from_the_old_pose_to_the_new(monkeypatch):

@@ -49,7 +49,7 @@ BLEND_SECONDS = 0.3
 def blend_capacity(capacity: int) -> int:
     """Old-level poses decoded per step for agents that left a level of ``capacity`` slots:
     an eighth of it, at least 64 (never more than the level holds)."""
-    return min(capacity, 64)
+    return min(capacity, max(64, capacity // 8))
 
 
 def blend_plan(
@@ -76,17 +76,30 @@ def blend_plan(
 class BlendRows(eqx.Module):
     """The poses agents blend from this frame: ``old (K + 1, P, 3)`` decoded at the level each
     left, ``weight (K + 1,)`` its ``w``, and ``row (N,)`` each agent's row (``K``, a zero row
-    with weight 0, for agents not blending)."""
+    with weight 0, for agents not blending); ``place`` each row's place in the levels' slots
+    one after the other (their total: none)."""
 
     old: Float[Array, "K1 P 3"]
     weight: Float[Array, " K1"]
     row: Int[Array, " N"]
+    place: Int[Array, " K1"]
 
     def ease(self, agent: Int[Array, ""], points: Float[Array, "P 3"]) -> Float[Array, "P 3"]:
         """One agent's drawn points: ``w·p_from + (1 − w)·points`` (``points`` when it does
         not blend)."""
         k = self.row[agent]
         return points + self.weight[k] * (self.old[k] - points)
+
+    def ease_bucket(self, points: Float[Array, "C P 3"], start: int) -> Float[Array, "C P 3"]:
+        """A whole level's points, whose slots start at place ``start``: only the blending
+        rows are read and written (for a large bucket, where easing every slot in its decode
+        would cost more than the few that blend)."""
+        size = points.shape[0]
+        inside = (self.place >= start) & (self.place < start + size)
+        at = jnp.where(inside, self.place - start, size)
+        now = points[jnp.minimum(at, size - 1)]
+        eased = now + self.weight[:, None, None] * (self.old - now)
+        return points.at[at].set(eased, mode="drop")
 
 
 def blend_sources(
@@ -117,7 +130,7 @@ def blend_sources(
     unblended = jnp.maximum(jnp.sum(any_src, dtype=jnp.int32) - blending.shape[0], 0)
     src_b = jnp.concatenate([src, jnp.full((1,), levels, src.dtype)])[blending]
     padded = jnp.concatenate([blending, jnp.full((1,), total, blending.dtype)])
-    olds, ids_all = [], []
+    olds, ids_all, places = [], [], []
     for a in range(levels):
         mask = src_b == a
         (k,) = jnp.nonzero(mask, size=budget[a], fill_value=blending.shape[0])
@@ -126,13 +139,15 @@ def blend_sources(
         ids = ids_at[padded[k]]
         olds.append(decode(a, ids, jnp.minimum(count, budget[a])))
         ids_all.append(ids)
+        places.append(padded[k])
     ids = jnp.concatenate(ids_all)
     rows = ids.shape[0]
     old = jnp.concatenate([*olds, jnp.zeros((1, *olds[0].shape[1:]), olds[0].dtype)])
     weight = jnp.concatenate([left[jnp.minimum(ids, n - 1)] / BLEND_SECONDS, jnp.zeros(1)])
     weight = jnp.where(jnp.concatenate([ids < n, jnp.zeros(1, bool)]), weight, 0.0)
     row = jnp.full(n, rows, jnp.int32).at[ids].set(jnp.arange(rows, dtype=jnp.int32), mode="drop")
-    return BlendRows(old, weight.astype(old.dtype), row), unblended
+    place = jnp.concatenate([*places, jnp.full((1,), total, blending.dtype)])
+    return BlendRows(old, weight.astype(old.dtype), row, place.astype(jnp.int32)), unblended
 
 
 def blend_levels(
@@ -142,14 +157,19 @@ def blend_levels(
     left: Float[Array, " N"],
     decode: Callable[[int, Int[Array, " K"], Array], Float[Array, "K P 3"]],
 ) -> tuple[tuple[Float[Array, "C P 3"], ...], Int[Array, ""]]:
-    """Each level's points with the blending agents' poses eased from their ``source`` level
-    (:func:`blend_sources`, then :meth:`BlendRows.ease` on every slot): what the step draws,
-    for points decoded without the blend."""
+    """Each level's points with the blending agents' poses eased from their ``source`` level,
+    as the step does it for points decoded without the blend (:func:`blend_sources`, then
+    :meth:`BlendRows.ease` on every slot of every level but the last, whose blending rows
+    :meth:`BlendRows.ease_bucket` eases)."""
     rows, unblended = blend_sources(slots, source, left, decode)
     n = source.shape[0]
-    eased = []
-    for ids, pts in zip(slots, points, strict=True):
-        safe = jnp.where(ids < n, ids, 0)
-        out = jax.vmap(rows.ease)(safe, pts)
-        eased.append(jnp.where((ids < n)[:, None, None], out, pts))
+    eased, start = [], 0
+    for b, (ids, pts) in enumerate(zip(slots, points, strict=True)):
+        if b < len(slots) - 1:
+            safe = jnp.where(ids < n, ids, 0)
+            out = jax.vmap(rows.ease)(safe, pts)
+            eased.append(jnp.where((ids < n)[:, None, None], out, pts))
+        else:
+            eased.append(rows.ease_bucket(pts, start))
+        start += ids.shape[0]
     return tuple(eased), unblended

@@ -357,13 +357,19 @@ def step(
         if cached:
             state = refresh_far_cores(cm, state, safe, ok)
 
-        def one(i, lv=lv, near=near, lock=lock, cached=cached, state=state):
+        # Small buckets ease each agent in its decode; the large last one only its blending
+        # rows afterwards (level_blend.BlendRows).
+        in_decode = lv < nlev - 1
+
+        def one(i, lv=lv, near=near, lock=lock, cached=cached, state=state, ease=in_decode):
             pts, *motion = _agent_level(cm, lv, near, lock, state, i, dt, cached, config.avoid)
-            return (blend.ease(i, pts), *motion)
+            return (blend.ease(i, pts) if ease else pts, *motion)
 
         used = jnp.sum(ok, dtype=jnp.int32)
         chunk = bucket_chunk(len(slots), config.chunk, cm.decoders.levels[lv].cores.shape[1])
         pts, t_l, yaw_l, pos_l = decode_bucket(jax.vmap(one), safe, used, chunk)
+        if not in_decode:
+            pts = blend.ease_bucket(pts, sum(len(s) for s in buckets.slots[:lv]))
         points.append(pts)
         dtau = dtau.at[slots].set(t_l, mode="drop")
         dyaw = dyaw.at[slots].set(yaw_l, mode="drop")
