@@ -331,6 +331,41 @@ def step(
     detailed = visible & (pixels >= config.min_pixels)
     buckets = assign_buckets(min_level, importance, detailed, config.capacities)
 
+    # The dynamics first: the phase follows this step's walk (the root moves by v·dt below).
+    alive = state.alive
+    crowding = jnp.zeros((), jnp.int32)
+    if config.avoid:
+        grid = cast(GridSpec, config.grid)  # StepConfig.check requires it with avoid
+        tx, tz = waypoint_xz(state.waypoints, state.waypoint)
+        due, elapsed = None, dt
+        if config.far_every > 1:  # simulation LOD: far agents in turn
+            n = state.x.shape[0]
+            near_slots = sum(config.capacities[: config.blend_max_level + 1])
+            size = min(n, -(-n // config.far_every) + near_slots)
+            drawn_near = buckets.level <= config.blend_max_level
+            due = due_rows(drawn_near, state.clock, dt, config.far_every, size)
+            elapsed = jnp.where(drawn_near, dt, dt * config.far_every)  # since the last update
+        vx, vz, crowding = steer(
+            grid,
+            state.x,
+            state.z,
+            tx,
+            tz,
+            state.speed,
+            state.radius,
+            alive,
+            gather,
+            ids,
+            scene,
+            None if scene is None else current_field(state),
+            due,
+            (state.vx, state.vz),
+            config.anticipate,
+            elapsed,
+        )
+        # The decode reads the velocity the root walks this step (follow_phase).
+        state = eqx.tree_at(lambda s: (s.vx, s.vz), state, (vx, vz))
+
     source, left = blend_plan(
         state.shown, state.blend_from, state.blend_left, buckets.level, state.alive, nlev
     )
@@ -376,39 +411,10 @@ def step(
         dx = dx.at[slots].set(pos_l[:, 0], mode="drop")
         dz = dz.at[slots].set(pos_l[:, 1], mode="drop")
 
-    alive = state.alive
-    crowding = jnp.zeros((), jnp.int32)
     if config.avoid:
-        grid = cast(GridSpec, config.grid)  # StepConfig.check requires it with avoid
-        tx, tz = waypoint_xz(state.waypoints, state.waypoint)
-        due, elapsed = None, dt
-        if config.far_every > 1:  # simulation LOD: far agents in turn
-            n = state.x.shape[0]
-            near_slots = sum(config.capacities[: config.blend_max_level + 1])
-            size = min(n, -(-n // config.far_every) + near_slots)
-            drawn_near = buckets.level <= config.blend_max_level
-            due = due_rows(drawn_near, state.clock, dt, config.far_every, size)
-            elapsed = jnp.where(drawn_near, dt, dt * config.far_every)  # since the last update
-        vx, vz, crowding = steer(
-            grid,
-            state.x,
-            state.z,
-            tx,
-            tz,
-            state.speed,
-            state.radius,
-            alive,
-            gather,
-            ids,
-            scene,
-            None if scene is None else current_field(state),
-            due,
-            (state.vx, state.vz),
-            config.anticipate,
-            elapsed,
-        )
         dx, dz = vx * dt, vz * dt
-        heading = turn_towards(state.heading, vx, vz, dt)
+        # A standing agent (slower than STAND_BELOW) keeps its heading: its feet stay put.
+        heading = turn_towards(state.heading, vx, vz, dt, min_speed=STAND_BELOW)
     else:  # the velocity is the dynamics' output; without them it stays as it was
         vx, vz = state.vx, state.vz
         heading = state.heading + dyaw
@@ -420,7 +426,7 @@ def step(
         vx,
         vz,
     )
-    slow = jnp.hypot(state.vx, state.vz) < STAND_BELOW  # the speed the phase followed
+    slow = jnp.hypot(vx, vz) < STAND_BELOW  # the speed the phase followed
     state = eqx.tree_at(lambda s: (s.x, s.z, s.heading, s.tau, s.vx, s.vz), state, moved)
     if config.avoid:  # (without the dynamics nobody stands: ``stands`` stays False)
         stands = alive & slow & stands_at(cm, state.tau)
