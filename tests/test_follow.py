@@ -173,3 +173,26 @@ def test_a_standing_agent_keeps_its_feet_still_and_moves_without_jumps(sim_state
         prev, prev_stands, state = drawn, stands, new
     assert standing_frames > 100  # 6 agents standing for most of 3 s
     assert worst_jump < 0.08
+
+
+def test_an_agent_flagged_standing_does_not_walk_in_that_step(sim_state):
+    """Stand (free speed 2 cm/s) for 2 s, then walk off (1.3 m/s). Whenever the step flags an
+    agent standing, its root moved less than STAND_BELOW·dt in that step: the flag, the
+    phase and the root follow one velocity (they once followed two, a step apart, and an
+    agent setting off was still 'standing' while its root moved 4 cm a frame). Oracle: the
+    recorded positions."""
+    sim, state = sim_state
+    fn = sim.compiled(donate=False)
+    state = replace(state, speed=jnp.full_like(state.speed, 0.02))
+    flagged = moved_while_flagged = 0
+    for i in range(90):
+        if i == 60:
+            state = replace(state, speed=jnp.full_like(state.speed, 1.3))
+        new, _ = fn(state, sim.view_at(i * sim.dt), sim.dt)
+        stands = np.asarray(new.stands)
+        step = np.hypot(*(np.asarray(new.position) - np.asarray(state.position)).T)
+        flagged += int(stands.sum())
+        moved_while_flagged += int(np.sum(stands & (step > STAND_BELOW * float(sim.dt) + 1e-6)))
+        state = new
+    assert flagged > 100  # premise: they stood
+    assert moved_while_flagged == 0

@@ -35,8 +35,9 @@ With ``StepConfig.avoid`` (``[dynamics] avoid = true``) the crowd dynamics move 
 instead of step 2's decoded velocity and step 3's dead reckoning (:mod:`jcrowd.crowd.steering`:
 the collision-free speed model among neighbours, the body turning towards the velocity), the
 clips of step 4 follow the simulated velocity, the phase follows the distance walked (below
-0.1 m/s it waits at a double-support phase: the agent stands; :func:`follow_phase`), and foot
-locking is off.
+0.1 m/s it waits at a double-support phase: the agent stands, and keeps its heading;
+:func:`follow_phase`), and foot locking is off. The dynamics run before the synthesis, so the
+phase follows the velocity the root walks in the same step.
 
 Agents at the end of a non-looped path stop being ``alive`` (they leave the crowd; the count is
 in the frame). Everything has a static shape; no host round trip inside a step.
