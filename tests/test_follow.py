@@ -20,7 +20,7 @@ import pytest
 from jcrowd import load_default_model
 from jcrowd.crowd import prepare
 from jcrowd.crowd.export import _pose_vectors
-from jcrowd.crowd.stepping import (
+from jcrowd.crowd.following import (
     FOLLOW_MAX_RATE,
     STAND_APPROACH,
     STAND_BELOW,

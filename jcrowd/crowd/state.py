@@ -152,7 +152,7 @@ class CrowdState(eqx.Module):
     vz: Float[Array, " N"]
     radius: Float[Array, " N"]  # m, the body disc the crowd dynamics keeps apart
     # With the dynamics on: the agent stands, its phase waiting at a double-support phase
-    # (jcrowd.crowd.stepping.follow_phase).
+    # (jcrowd.crowd.following.follow_phase).
     stands: Bool[Array, " N"]
     # Level changes ease in (jcrowd.crowd.level_blend): the level drawn in the last frame and
     # the level being blended from (L: none), with the blend's seconds left.

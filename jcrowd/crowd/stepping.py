@@ -36,8 +36,8 @@ instead of step 2's decoded velocity and step 3's dead reckoning (:mod:`jcrowd.c
 the collision-free speed model among neighbours, the body turning towards the velocity), the
 clips of step 4 follow the simulated velocity, the phase follows the distance walked (below
 0.1 m/s it waits at a double-support phase: the agent stands, and keeps its heading;
-:func:`follow_phase`), and foot locking is off. The dynamics run before the synthesis, so the
-phase follows the velocity the root walks in the same step.
+:func:`~jcrowd.crowd.following.follow_phase`), and foot locking is off. The dynamics run
+before the synthesis, so the phase follows the velocity the root walks in the same step.
 
 Agents at the end of a non-looped path stop being ``alive`` (they leave the crowd; the count is
 in the frame). Everything has a static shape; no host round trip inside a step.
@@ -54,6 +54,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Int
 
 from jcrowd.crowd.clips import CrowdModel, local_to_world
+from jcrowd.crowd.following import STAND_BELOW, follow_phase, stands_at
 from jcrowd.crowd.level_blend import blend_plan, blend_sources
 from jcrowd.crowd.lod import (
     CameraView,
@@ -72,14 +73,9 @@ from jcrowd.crowd.synthesis import clip_core, coeffs_at, level_points, pose_from
 from jcrowd.motion.fastmath import sincos
 
 __all__ = [
-    "FOLLOW_MAX_RATE",
-    "STAND_APPROACH",
-    "STAND_BELOW",
     "bucket_chunk",
     "decode_bucket",
     "default_capacities",
-    "follow_phase",
-    "stands_at",
     "step",
 ]
 
@@ -112,58 +108,6 @@ def _smoothstep(x: Array) -> Array:
     return x * x * (3.0 - 2.0 * x)
 
 
-FOLLOW_MAX_RATE = 2.0
-"""With the dynamics on, the phase runs at most this many times its clip's own rate."""
-
-STAND_BELOW = 0.1
-"""With the dynamics on, an agent slower than this (m/s) stands: its phase goes on to the next
-double-support phase and waits there (:func:`follow_phase`)."""
-
-STAND_APPROACH = 0.4
-"""On its way to stand, the phase runs at least this fraction of the clip's own rate."""
-
-
-def follow_phase(
-    cm: CrowdModel, tau: Array, natural: Array, walked: Array, stride: Array, dt: Array
-) -> Array:
-    """The phase step of an agent whose root the simulation moves (issue 19).
-
-    Walking: the aligned frames that carry the clip's root as far as the agent walked this step,
-    ``walked / stride`` with ``stride`` the clip's root travel per aligned frame at the phase
-    (m) — the stance foot then stays where it was planted on a straight walk whatever the
-    simulated speed; between 0 and :data:`FOLLOW_MAX_RATE` times ``natural``, the clip's own
-    step ``dt·fps/ΔA``. Below the slowest captured cycle the stride stays that cycle's and the
-    cadence drops with the speed.
-
-    Standing (slower than :data:`STAND_BELOW`): the phase goes on, at least
-    :data:`STAND_APPROACH` times its own rate, to the clip's next double-support phase
-    (:attr:`~jcrowd.crowd.clips.CrowdModel.double_support`, both heels down) and waits there
-    until the agent walks again: the standing pose is the clip's own double-support frame, and
-    the walk resumes from it.
-    """
-    rate = jnp.clip(walked / jnp.maximum(stride, 1e-4), 0.0, FOLLOW_MAX_RATE * natural)
-    ahead = jnp.full_like(tau, 2.0 * (cm.frames - 1))
-    for p in _stand_phases(cm):
-        ahead = jnp.where((p - tau >= -1e-3) & (p - tau < ahead), jnp.maximum(p - tau, 0.0), ahead)
-    towards = jnp.minimum(jnp.maximum(rate, STAND_APPROACH * natural), ahead)
-    slow = walked < STAND_BELOW * dt
-    return jnp.where(slow, jnp.where(ahead <= 1e-3, 0.0, towards), rate)
-
-
-def stands_at(cm: CrowdModel, tau: Array) -> Array:
-    """Whether phase ``tau`` is at one of the clip's double-support phases (within 1e-3)."""
-    near = jnp.zeros(tau.shape, bool)
-    for p in _stand_phases(cm):
-        near = near | (jnp.abs(tau - p) <= 1e-3)
-    return near
-
-
-def _stand_phases(cm: CrowdModel) -> tuple[float, ...]:
-    """The double-support phases in increasing order, and the first again one cycle on (a
-    phase about to wrap waits at the cycle's end, which is the next cycle's start)."""
-    return (*cm.double_support, cm.double_support[0] + float(cm.frames - 1))
-
-
 def _agent_level(
     cm: CrowdModel,
     level: int,
@@ -181,7 +125,7 @@ def _agent_level(
     that the stance foot stays put (see :func:`step`). ``cached``: the core is the agent's
     ``far_core`` (the coarsest level, kept current by
     :func:`jcrowd.crowd.state.refresh_far_cores`). ``follow``: the phase advances with the
-    distance the agent walks (:func:`follow_phase`).
+    distance the agent walks (:func:`~jcrowd.crowd.following.follow_phase`).
     """
     lv = cm.decoders.levels[level]
     last = float(cm.frames - 1)
@@ -274,7 +218,8 @@ def _dead_reckoning(
     cm: CrowdModel, state: CrowdState, dt: Array, follow: bool = False
 ) -> tuple[Array, Array, Array, Array]:
     """Root-only advance ``(dτ, dyaw, dx, dz)`` along the clip's arc at its mean rate (with
-    ``follow``, the phase at the clip's mean stride per aligned frame, :func:`follow_phase`)."""
+    ``follow``, the phase at the clip's mean stride per aligned frame,
+    :func:`~jcrowd.crowd.following.follow_phase`)."""
     ix, iz, iyaw = cm.index[:3]
     last = float(cm.frames - 1)
     control, _, duration = state.clip()

@@ -1,0 +1,68 @@
+"""Walkers following the simulated crowd (issue 19): the gait phase advances with the distance
+the root walks, and a slow agent stands at a double-support phase.
+
+With the crowd dynamics on (:attr:`~jcrowd.crowd.state.StepConfig.avoid`) the simulation moves
+the roots; the step (:mod:`jcrowd.crowd.stepping`) asks :func:`follow_phase` how far each
+agent's phase goes in a step and :func:`stands_at` whether it stands.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from jcrowd.crowd.clips import CrowdModel
+
+__all__ = ["FOLLOW_MAX_RATE", "STAND_APPROACH", "STAND_BELOW", "follow_phase", "stands_at"]
+
+
+FOLLOW_MAX_RATE = 2.0
+"""With the dynamics on, the phase runs at most this many times its clip's own rate."""
+
+STAND_BELOW = 0.1
+"""With the dynamics on, an agent slower than this (m/s) stands: its phase goes on to the next
+double-support phase and waits there (:func:`follow_phase`)."""
+
+STAND_APPROACH = 0.4
+"""On its way to stand, the phase runs at least this fraction of the clip's own rate."""
+
+
+def follow_phase(
+    cm: CrowdModel, tau: Array, natural: Array, walked: Array, stride: Array, dt: Array
+) -> Array:
+    """The phase step of an agent whose root the simulation moves (issue 19).
+
+    Walking: the aligned frames that carry the clip's root as far as the agent walked this step,
+    ``walked / stride`` with ``stride`` the clip's root travel per aligned frame at the phase
+    (m) — the stance foot then stays where it was planted on a straight walk whatever the
+    simulated speed; between 0 and :data:`FOLLOW_MAX_RATE` times ``natural``, the clip's own
+    step ``dt·fps/ΔA``. Below the slowest captured cycle the stride stays that cycle's and the
+    cadence drops with the speed.
+
+    Standing (slower than :data:`STAND_BELOW`): the phase goes on, at least
+    :data:`STAND_APPROACH` times its own rate, to the clip's next double-support phase
+    (:attr:`~jcrowd.crowd.clips.CrowdModel.double_support`, both heels down) and waits there
+    until the agent walks again: the standing pose is the clip's own double-support frame, and
+    the walk resumes from it.
+    """
+    rate = jnp.clip(walked / jnp.maximum(stride, 1e-4), 0.0, FOLLOW_MAX_RATE * natural)
+    ahead = jnp.full_like(tau, 2.0 * (cm.frames - 1))
+    for p in _stand_phases(cm):
+        ahead = jnp.where((p - tau >= -1e-3) & (p - tau < ahead), jnp.maximum(p - tau, 0.0), ahead)
+    towards = jnp.minimum(jnp.maximum(rate, STAND_APPROACH * natural), ahead)
+    slow = walked < STAND_BELOW * dt
+    return jnp.where(slow, jnp.where(ahead <= 1e-3, 0.0, towards), rate)
+
+
+def stands_at(cm: CrowdModel, tau: Array) -> Array:
+    """Whether phase ``tau`` is at one of the clip's double-support phases (within 1e-3)."""
+    near = jnp.zeros(tau.shape, bool)
+    for p in _stand_phases(cm):
+        near = near | (jnp.abs(tau - p) <= 1e-3)
+    return near
+
+
+def _stand_phases(cm: CrowdModel) -> tuple[float, ...]:
+    """The double-support phases in increasing order, and the first again one cycle on (a
+    phase about to wrap waits at the cycle's end, which is the next cycle's start)."""
+    return (*cm.double_support, cm.double_support[0] + float(cm.frames - 1))
