@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jcrowd.crowd import candidates, cell_list, grid_spec
+from jcrowd.crowd.neighbours import exclusive_prefix_sum
 from jcrowd.errors import JcrowdError
 
 
@@ -184,3 +185,47 @@ def test_an_empty_crowd_and_a_lone_agent():
     assert int(one.place[0]) == 0 and int(one.order[0]) == 0 and int(one.start[-1]) == 1
     cand = np.asarray(candidates(spec, one, jnp.ones((1, 2))))
     assert (cand == 1).all()
+
+
+def _prefix_loop(x):
+    """The running sum with a leading 0, one entry after the other (a plain Python loop)."""
+    out, total = [0], 0
+    for v in x:
+        total += int(v)
+        out.append(total)
+    return np.asarray(out, np.int64)
+
+
+@pytest.mark.parametrize("c", [0, 1, 15, 16, 17, 255, 256, 257, 4099])
+def test_exclusive_prefix_sum_equals_a_loop(c):
+    """Sizes around the block (16) and its square cover the padding and the recursion; exact
+    (integers), so no tolerance. Catches an off-by-one block offset or a lost tail."""
+    x = np.random.default_rng(c).integers(0, 40, c).astype(np.int32)
+    got = np.asarray(exclusive_prefix_sum(jnp.asarray(x)))
+    np.testing.assert_array_equal(got, _prefix_loop(x))
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.integers(0, 1000), max_size=600))
+def test_exclusive_prefix_sum_properties(values):
+    """Starts at 0, ends at the total, and each step adds that entry (differences give x back)."""
+    x = jnp.asarray(np.asarray(values, np.int32))
+    s = np.asarray(exclusive_prefix_sum(x))
+    assert s.shape == (len(values) + 1,) and s[0] == 0 and s[-1] == sum(values)
+    np.testing.assert_array_equal(np.diff(s), np.asarray(values, np.int64))
+
+
+def test_exclusive_prefix_sum_jit_equals_eager_and_counts_come_from_ranks():
+    """jit == eager; and in a cell list the starts' differences are each cell's stored count,
+    counted here from the agents' cells (the step reads the counts off the rounds' marks)."""
+    x = jnp.asarray(np.random.default_rng(3).integers(0, 9, 1000).astype(np.int32))
+    np.testing.assert_array_equal(
+        np.asarray(jax.jit(exclusive_prefix_sum)(x)), np.asarray(exclusive_prefix_sum(x))
+    )
+    pos, alive = _crowd(300, 7)
+    spec = grid_spec((-5.0, -3.0), (5.0, 3.0), 0.8, max_density=1.5, headroom=1.0)
+    cl = cell_list(spec, jnp.asarray(pos), jnp.asarray(alive))
+    stored = np.asarray(cl.place) < 300
+    want = np.bincount(np.asarray(cl.cell)[stored], minlength=spec.num_cells)
+    np.testing.assert_array_equal(np.diff(np.asarray(cl.start)), want)
+    assert int(cl.overflow) > 0  # some cells full: their count stops at the capacity
