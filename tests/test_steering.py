@@ -198,3 +198,43 @@ def _placed(state, spots):
     # The scenario jitters each agent's waypoints; the test places them exactly.
     waypoints = jnp.broadcast_to(jnp.asarray([[0.0, 0.0], [0.0, 10.0]]), state.waypoints.shape)
     return replace(state, x=x, z=z, waypoints=waypoints)
+
+
+def test_agents_are_numbered_in_grid_cell_order_within_each_group():
+    """With the dynamics on, prepare renumbers each group's agents in the neighbour grid's cell
+    order (locality of the step's reads); the crowd itself is the same. Oracle: the unsorted
+    spawn and the cells computed here by a loop. Catches a permutation applied to some columns
+    and not others (positions would no longer match their waypoints or speeds), groups mixed,
+    or no sorting at all (spawn order is random in space)."""
+    from jcrowd.scenario import spawn
+
+    scenario = parse_scenario(COUNTERFLOW.format(avoid="true", model="collision-free-speed"), "c")
+    sim, state = prepare(scenario, load_default_model())
+    raw, got = spawn(scenario), sim.spawn
+    grid = sim.config.grid
+    assert grid is not None
+
+    # Same agents: each spawned row (position, speed, height, goal) appears once in the result.
+    def rows(sp):
+        return sorted(
+            zip(
+                map(tuple, np.round(sp.position, 6)),
+                np.round(sp.speed, 6),
+                np.round(sp.height, 6),
+                map(tuple, np.round(sp.waypoints.reshape(len(sp.speed), -1), 6)),
+                sp.group,
+                strict=True,
+            )
+        )
+
+    assert rows(raw) == rows(got)
+    np.testing.assert_array_equal(got.group, raw.group)  # groups keep their runs of ids
+    for g in np.unique(got.group):
+        cells = []
+        for x, z in got.position[got.group == g]:
+            ix = min(max(int((x - grid.origin[0]) // grid.cell), 0), grid.shape[0] - 1)
+            iz = min(max(int((z - grid.origin[1]) // grid.cell), 0), grid.shape[1] - 1)
+            cells.append(ix * grid.shape[1] + iz)
+        assert cells == sorted(cells)
+    np.testing.assert_allclose(np.asarray(state.x), got.position[:, 0], atol=1e-6)
+    assert not np.array_equal(raw.position, got.position)  # premise: spawn order was not sorted

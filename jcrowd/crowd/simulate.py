@@ -188,6 +188,8 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
     levels = len(model.levels)
     lod = scenario.lod
     sp = spawn(scenario)
+    if scenario.dynamics.avoid:
+        sp = _in_grid_order(sp, _neighbour_grid(scenario))
     sources, times = spawn_sources(scenario)
     queue = None
     if len(times):
@@ -250,6 +252,24 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         resting=config.avoid,
     )
     return Simulation(crowd, config, scenario, sp, scene, pool), state
+
+
+def _in_grid_order(sp: Spawn, grid: GridSpec) -> Spawn:
+    """The spawned agents renumbered within each group in the neighbour grid's cell order
+    (stable; groups keep their order and their agents stay one run of ids).
+
+    With the dynamics on, the step reads the crowd in cell order every step (the grid's
+    counting sort, the candidates' rows) and writes per-cell tables: with ids in spawn order
+    those reads jump over the whole crowd, with ids in cell order they run nearly in sequence.
+    Measured on the plaza (two CPU devices, alternated steps in one process): 30.0 → 28.4 ms
+    at 100k agents, 305 → 280 ms at 1M. The order holds at the start and loosens as people
+    walk (nothing re-sorts the crowd later).
+    """
+    ix = np.clip(np.floor((sp.position[:, 0] - grid.origin[0]) / grid.cell), 0, grid.shape[0] - 1)
+    iz = np.clip(np.floor((sp.position[:, 1] - grid.origin[1]) / grid.cell), 0, grid.shape[1] - 1)
+    cell = ix.astype(np.int64) * grid.shape[1] + iz.astype(np.int64)
+    order = np.lexsort((cell, sp.group))  # by group, then cell; ties keep spawn order
+    return Spawn(**{f.name: getattr(sp, f.name)[order] for f in dataclasses.fields(Spawn)})
 
 
 def _state_arrays(scenario: Scenario, sp: Spawn, fields: bool) -> dict[str, Any]:
