@@ -62,7 +62,7 @@ def sim_state(model):
     return prepare(parse_scenario(SCENE, "t.toml"), model)
 
 
-def _oracle(tau, natural, walked, stride, dt, phases, last):
+def _oracle(tau, natural, walked, stride, dt, phases, last, mean_rate):
     """follow_phase case by case, one agent at a time (plain Python floats)."""
     rate = min(max(walked / max(stride, 1e-4), 0.0), FOLLOW_MAX_RATE * natural)
     if walked >= STAND_BELOW * dt:
@@ -71,7 +71,7 @@ def _oracle(tau, natural, walked, stride, dt, phases, last):
     ahead = max(ahead, 0.0)
     if ahead <= 1e-3:
         return 0.0
-    return min(max(rate, STAND_APPROACH * natural), ahead)
+    return min(STAND_APPROACH * mean_rate, ahead)
 
 
 def test_phase_follows_the_distance_walked_and_waits_at_double_support(sim_state):
@@ -91,7 +91,7 @@ def test_phase_follows_the_distance_walked_and_waits_at_double_support(sim_state
         follow_phase(cm, *(jnp.asarray(a, jnp.float32) for a in (tau, natural, walked, stride)), dt)
     )
     want = [
-        _oracle(*a, dt, cm.double_support, last)
+        _oracle(*a, dt, cm.double_support, last, last * dt / cm.cycle_seconds)
         for a in zip(tau, natural, walked, stride, strict=True)
     ]
     # float32 phases (≤ 99) against float64: a few ulps of 99.

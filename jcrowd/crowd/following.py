@@ -23,8 +23,13 @@ STAND_BELOW = 0.1
 """With the dynamics on, an agent slower than this (m/s) stands: its phase goes on to the next
 double-support phase and waits there (:func:`follow_phase`)."""
 
-STAND_APPROACH = 0.4
-"""On its way to stand, the phase runs at least this fraction of the clip's own rate."""
+STAND_APPROACH = 0.35
+"""On its way to stand, the phase runs at this fraction of the model's mean cadence (a cycle per
+:attr:`~jcrowd.crowd.clips.CrowdModel.cycle_seconds`): below half a walk's, so an agent about
+to stand does not walk in place (issue 19). Not a fraction of the clip's own rate at the
+phase, ``dt·fps/ΔA``: the time warp makes that two or three times the mean in parts of the
+cycle (measured on the entrance run: 0.4 of it put 4 % of the slow agent-frames above half
+the mean cadence)."""
 
 
 def follow_phase(
@@ -39,8 +44,8 @@ def follow_phase(
     step ``dt·fps/ΔA``. Below the slowest captured cycle the stride stays that cycle's and the
     cadence drops with the speed.
 
-    Standing (slower than :data:`STAND_BELOW`): the phase goes on, at least
-    :data:`STAND_APPROACH` times its own rate, to the clip's next double-support phase
+    Standing (slower than :data:`STAND_BELOW`): the phase goes on, at :data:`STAND_APPROACH`
+    times the model's mean rate, to the clip's next double-support phase
     (:attr:`~jcrowd.crowd.clips.CrowdModel.double_support`, both heels down) and waits there
     until the agent walks again: the standing pose is the clip's own double-support frame, and
     the walk resumes from it.
@@ -49,7 +54,7 @@ def follow_phase(
     ahead = jnp.full_like(tau, 2.0 * (cm.frames - 1))
     for p in _stand_phases(cm):
         ahead = jnp.where((p - tau >= -1e-3) & (p - tau < ahead), jnp.maximum(p - tau, 0.0), ahead)
-    towards = jnp.minimum(jnp.maximum(rate, STAND_APPROACH * natural), ahead)
+    towards = jnp.minimum(STAND_APPROACH * (cm.frames - 1) * dt / cm.cycle_seconds, ahead)
     slow = walked < STAND_BELOW * dt
     return jnp.where(slow, jnp.where(ahead <= 1e-3, 0.0, towards), rate)
 
