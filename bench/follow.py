@@ -17,9 +17,11 @@ everything (``jcrowd run --record all``), and measures from the recording:
 - ``slow_share``: agent-frames whose simulated speed is below ``SLOW_M_S``;
   ``standing_share``: alive agent-frames standing (the step's ``stands``: the phase waiting at
   a double-support phase; ``0`` before the step had it);
-  ``standing_skate_cm_per_frame``: the drawn feet of standing agent-frames (of slow ones before
-  the step could stand), each foot's lower joint (ankle or toe) moving horizontally per frame,
-  mean over both feet;
+  ``standing_skate_cm_per_frame``: the drawn feet of standing agent-frames (of slow ones in
+  recordings from before the step could stand), each foot's lower joint (ankle or toe) moving
+  horizontally per frame, mean over both feet; ``None`` ("—") when nobody stood two frames
+  running (until 2026-12-03 the slow frames stood in then, so the counter-flow rows' 1.1–1.7
+  cm were slow walkers' feet, not standing ones);
   ``walking_in_place_share``: of the slow agent-frames, those whose gait phase advances at
   half the model's cadence or more (a walk at walking cadence while hardly moving).
 - ``pop_cm`` (p99) and ``pop_ratio`` (p99): at each level change of a drawn agent, the largest
@@ -64,6 +66,11 @@ SLOW_M_S = 0.2
 """Agent-frames slower than this count as slow (the issue's bound for walking in place)."""
 
 PER_FRAME = ("position", "heading", "tau", "control", "control_next", "has_next")
+
+
+def _or_dash(value: object) -> str:
+    """A table cell: the value, or "—" for None (nothing to measure)."""
+    return "—" if value is None else str(value)
 
 
 def drawn_points(rec: dict, n: int) -> np.ndarray:
@@ -133,14 +140,16 @@ def measure(model, name: str, steps: int | None) -> dict:
     # Drawn feet of slow agent-frames: each foot's lower joint, horizontal motion per frame.
     step_feet = []
     d0, d1 = pts[:-1], pts[1:]
-    still = (standing[:-1] & standing[1:]) if standing.any() else slow
+    # Recordings from before the step could stand have no "stands": their slow frames stand in.
+    still = (standing[:-1] & standing[1:]) if "stands" in rec else slow
     ok = still & drawn[:-1] & drawn[1:]
     for ankle, toe in foot_pairs:
         low = np.where(d0[..., ankle, 1] <= d0[..., toe, 1], ankle, toe)
         a = np.take_along_axis(d0, low[..., None, None], axis=2)[..., 0, :]
         b = np.take_along_axis(d1, low[..., None, None], axis=2)[..., 0, :]
         step_feet.append(100 * np.linalg.norm((b - a)[..., [0, 2]], axis=-1)[ok])
-    standing_skate = float(np.mean(np.concatenate(step_feet))) if ok.any() else 0.0
+    # None: nobody stood in two frames running (nothing to measure).
+    standing_skate = float(np.mean(np.concatenate(step_feet))) if ok.any() else None
 
     skates, pops, ratios, steady, wraps = [], [], [], [], []
     ease = int(np.ceil(BLEND_SECONDS * fps)) + 1  # frames a level change moves the pose over
@@ -189,7 +198,9 @@ def measure(model, name: str, steps: int | None) -> dict:
         "skate_cm_per_frame": round(float(np.mean(skates)), 3),
         "slow_share": round(float(slow.sum() / max(both.sum(), 1)), 4),
         "standing_share": round(float(standing.sum() / max(alive.sum(), 1)), 4),
-        "standing_skate_cm_per_frame": round(standing_skate, 3),
+        "standing_skate_cm_per_frame": (
+            None if standing_skate is None else round(standing_skate, 3)
+        ),
         "walking_in_place_share": round(float(in_place.sum() / max(slow.sum(), 1)), 4),
         "level_changes": len(pops),
         "pop_cm": pct(pops, 99),
@@ -229,7 +240,7 @@ def main() -> None:
             f"| {name} | {rd['p50']} / {rd['p99']} / {rd['max']} | "
             f"{r['heading_deviation_deg']['p99']} | {r['skate_cm_per_frame']} "
             f"({r['skate_ratio']}×) | {r['slow_share']} | {r['standing_share']} | "
-            f"{r['standing_skate_cm_per_frame']} | {r['walking_in_place_share']} | "
+            f"{_or_dash(r['standing_skate_cm_per_frame'])} | {r['walking_in_place_share']} | "
             f"{r['level_changes']} | {r['pop_cm']} | {r['pop_ratio']} | {r['steady_jump_cm']} | "
             f"{r['wrap_jump_cm']} |"
         )
