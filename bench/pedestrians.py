@@ -113,7 +113,8 @@ def run_jcrowd(area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RADIU
         jnp.full(n, speed, jnp.float32),
         jnp.full(n, radius, jnp.float32),
         jnp.zeros(n, bool),
-        jnp.zeros((n, 2), jnp.float32) if MODEL == "anticipation" else None,
+        jnp.zeros((n, 2), jnp.float32),
+        MODEL == "anticipation",
     )
 
     def one(carry, t):
@@ -135,6 +136,7 @@ def run_jcrowd(area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RADIU
             peds.radius,
             peds.alive | appear,
             velocity,
+            peds.anticipate,
         )
         peds, _ = pedestrian_step(params, world, peds, DT)
         return (peds, pending & ~appear), (peds.position, peds.alive)
@@ -646,7 +648,8 @@ def counterflow(out):
             jnp.asarray(v0),
             jnp.full(n, RADIUS, jnp.float32),
             jnp.ones(n, bool),
-            jnp.asarray(e0 * v0[:, None]) if model == "anticipation" else None,
+            jnp.asarray(e0 * v0[:, None]),
+            model == "anticipation",
         )
         name = f"jcrowd {model}"
         for k in range(1, steps + 1):
@@ -754,6 +757,8 @@ def speed(sizes, out, pillars=True):
             jnp.full(n, SPEED, jnp.float32),
             jnp.full(n, RADIUS, jnp.float32),
             jnp.ones(n, bool),
+            jnp.zeros((n, 2), jnp.float32),
+            False,
         )
         # Split over the CPU devices (--cpu-devices; JuPedSim runs on one core either way).
         step = split_pedestrian_step() if jax.device_count() > 1 else jax.jit(pedestrian_step)

@@ -388,6 +388,56 @@ def test_anticipating_velocities_equal_the_reading(seed):
     assert np.abs(np.asarray(plain) - want_v).max() > 1e-2
 
 
+TAU_PLAIN = 0.1  # s: the plain model's reaction time
+
+
+def _oracle_reacting(pos, desired, speed, radius, walls, vel, dt):
+    """The plain model with a reaction time, float64 loops: Eq. (4)'s direction from the
+    desire and the bodies, relaxed from the last velocity's direction (kept when that is
+    slower than 5 cm/s) by ``min(1, dt/τ_p)`` with ``τ_p = 0.1`` s, then the walls and the
+    speed of Eqs. (2)–(3)."""
+    n = len(pos)
+    vel_out, gaps = np.zeros((n, 2)), np.full(n, np.inf)
+    for i in range(n):
+        e0 = _slid(i, desired[i], pos, radius, walls)
+        e = e0.copy()
+        for j in range(n):
+            if j != i:
+                e += _body_push(i, j, pos, radius, e0)
+        e /= np.hypot(*e)
+        sp = np.hypot(*vel[i])
+        prev = vel[i] / sp if sp > 0.05 else e
+        e = prev + (e - prev) * min(1.0, dt / TAU_PLAIN)
+        e /= np.hypot(*e)
+        vel_out[i], gaps[i] = _walls_then_speed(i, e, pos, speed, radius, walls)
+    return vel_out, gaps
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_plain_model_with_a_reaction_time_equals_the_loops(seed):
+    """``Motion`` without the crowd's velocities: the plain model whose direction relaxes (the
+    crowd step's, against the step-to-step swing of a dense queue). Same scenes and 1e-4 m/s
+    tolerance as the anticipating reading (float32 against float64). Catches the relaxation
+    applied after the walls, from the wrong velocity, or not at all (premise below)."""
+    pos, desired, speed, radius, walls = _scene(12, seed, spread=2.0)
+    vel = _velocities(12, seed)
+    dt = 1 / 30
+    want_v, _ = _oracle_reacting(pos, desired, speed, radius, walls, vel, dt)
+    n = len(pos)
+    f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, walls, vel)]
+    cand = jnp.asarray([[j for j in range(n) if j != i] for i in range(n)], jnp.int32)
+    wall_ids = jnp.broadcast_to(jnp.arange(len(walls), dtype=jnp.int32), (n, len(walls)))
+    motion = Motion(f32[5], None, dt)
+    got_v, _ = avoid(AvoidanceParams(), *f32[:4], cand, f32[4], wall_ids, motion=motion)
+    np.testing.assert_allclose(np.asarray(got_v), want_v, atol=1e-4)
+    jitted = jax.jit(
+        lambda *a: avoid(AvoidanceParams(), *a, motion=Motion(f32[5], None, jnp.float32(dt)))
+    )(*f32[:4], cand, f32[4], wall_ids)[0]
+    np.testing.assert_allclose(np.asarray(jitted), np.asarray(got_v), atol=1e-6)
+    plain, _ = avoid(AvoidanceParams(), *f32[:4], cand, f32[4], wall_ids)
+    assert np.abs(np.asarray(plain) - want_v).max() > 1e-2  # premise: the relaxation acts
+
+
 def test_anticipating_overlapping_bodies_equal_the_reading():
     """Eight agents dropped at random in 1.2 m × 1.2 m (bodies overlap, repulsions far above
     the desire): same oracle and tolerance."""

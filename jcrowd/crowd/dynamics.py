@@ -82,9 +82,11 @@ class Pedestrians(eqx.Module):
         speed: ``(N,)`` free walking speed ``v0`` (m/s).
         radius: ``(N,)`` m.
         alive: ``(N,)``.
-        velocity: ``(N, 2)`` the last step's velocity (m/s); with it agents anticipate
-            (:mod:`jcrowd.crowd.avoidance`), without it (``None``) the plain collision-free
-            speed model steps them.
+        velocity: ``(N, 2)`` the last step's velocity (m/s); with it the direction relaxes
+            over the reaction time and, with ``anticipate``, agents anticipate
+            (:mod:`jcrowd.crowd.avoidance`); without it (``None``) the collision-free speed
+            model of the paper steps them, without a reaction time.
+        anticipate: with ``velocity``, the anticipation model (else the plain one).
     """
 
     position: Float[Array, "N 2"]
@@ -93,6 +95,7 @@ class Pedestrians(eqx.Module):
     radius: Float[Array, " N"]
     alive: Bool[Array, " N"]
     velocity: Float[Array, "N 2"] | None = None
+    anticipate: bool = eqx.field(static=True, default=True)
 
 
 class StepInfo(eqx.Module):
@@ -120,14 +123,16 @@ def pedestrian_step(
     """
     desired = desired_directions(world.nav, peds.target, peds.position)
     columns = [peds.position, peds.radius[:, None], peds.alive[:, None].astype(peds.radius.dtype)]
-    if peds.velocity is not None:
+    anticipating = peds.velocity is not None and peds.anticipate
+    if peds.velocity is not None and peds.anticipate:
         columns.append(peds.velocity)
     mine = jnp.concatenate(columns, axis=1)
     every = mine if gather is None else gather(mine)
     pos, rad, live = every[:, :2], every[:, 2], every[:, 3] > 0.5
-    motion = (
-        None if peds.velocity is None else Motion(peds.velocity, every[:, 4:6], jnp.asarray(dt))
-    )
+    motion = None
+    if peds.velocity is not None:
+        crowd_v = every[:, 4:6] if anticipating else None
+        motion = Motion(peds.velocity, crowd_v, jnp.asarray(dt))
     rows = jnp.arange(peds.position.shape[0], dtype=jnp.int32) if ids is None else ids
     cells = cell_list(world.grid, pos, live)
     velocity = avoid_in_grid(

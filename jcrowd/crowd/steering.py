@@ -123,9 +123,10 @@ def steer(
     rows = jnp.arange(n, dtype=jnp.int32) if ids is None else ids
     cells = cell_list(grid, pos, live)
     motion = None
-    if anticipate:
+    if previous is not None:  # the direction relaxes from the last velocity
         elapsed = jnp.broadcast_to(jnp.asarray(dt, x.dtype), (n,))
-        motion = Motion(jnp.stack([px, pz], axis=1), every[:, 4:6], elapsed)
+        crowd_v = every[:, 4:6] if anticipate else None
+        motion = Motion(jnp.stack([px, pz], axis=1), crowd_v, elapsed)
     horizon = None
     if due is not None:
         sel = jnp.where(due < n, due, 0)
