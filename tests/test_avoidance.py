@@ -31,13 +31,19 @@ def _oracle(pos, desired, speed, radius, walls):
     n = len(pos)
     vel, gaps = np.zeros((n, 2)), np.full(n, np.inf)
     for i in range(n):
-        e0 = _slid(i, desired[i], pos, radius, walls)
-        e = e0.copy()
-        for j in range(n):
-            if j != i:
-                e += _body_push(i, j, pos, radius, e0)
+        e = _desire_and_bodies(i, desired, pos, radius, walls)
         vel[i], gaps[i] = _walls_then_speed(i, e, pos, speed, radius, walls)
     return vel, gaps
+
+
+def _desire_and_bodies(i, desired, pos, radius, walls):
+    """Eq. (4) before the walls: agent ``i``'s slid desire plus every other body's push."""
+    e0 = _slid(i, desired[i], pos, radius, walls)
+    e = e0.copy()
+    for j in range(len(pos)):
+        if j != i:
+            e += _body_push(i, j, pos, radius, e0)
+    return e
 
 
 def _slid(i, desired, pos, radius, walls):
@@ -399,11 +405,7 @@ def _oracle_reacting(pos, desired, speed, radius, walls, vel, dt):
     n = len(pos)
     vel_out, gaps = np.zeros((n, 2)), np.full(n, np.inf)
     for i in range(n):
-        e0 = _slid(i, desired[i], pos, radius, walls)
-        e = e0.copy()
-        for j in range(n):
-            if j != i:
-                e += _body_push(i, j, pos, radius, e0)
+        e = _desire_and_bodies(i, desired, pos, radius, walls)
         e /= np.hypot(*e)
         sp = np.hypot(*vel[i])
         prev = vel[i] / sp if sp > 0.05 else e
