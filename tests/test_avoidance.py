@@ -92,7 +92,12 @@ def _walls_then_speed(i, e, pos, speed, radius, walls):
         d = pos[i] - (a + t * (b - a))
         s = np.hypot(*d)
         e += AW * np.exp((radius[i] - s) / DW) * d / s
-    e /= np.hypot(*e)
+    return _speed_along(i, e / np.hypot(*e), pos, speed, radius, walls)
+
+
+def _speed_along(i, e, pos, speed, radius, walls):
+    """Agent ``i``'s spacing ahead along unit ``e`` and its speed there (Eqs. 2–3):
+    ``(velocity, spacing)``."""
     gap = np.inf
     for j in range(len(pos)):
         if j == i:
@@ -398,29 +403,28 @@ TAU_PLAIN = 0.1  # s: the plain model's reaction time
 
 
 def _oracle_reacting(pos, desired, speed, radius, walls, vel, dt):
-    """The plain model with a reaction time, float64 loops: Eq. (4)'s direction from the
-    desire and the bodies, relaxed from the last velocity's direction (kept when that is
-    slower than 5 cm/s) by ``min(1, dt/τ_p)`` with ``τ_p = 0.1`` s, then the walls and the
-    speed of Eqs. (2)–(3)."""
+    """The plain model with a reaction time, float64 loops: the paper's velocity (Eqs. 1–4,
+    walls included) relaxed from the last one by ``min(1, dt/τ_p)`` with ``τ_p = 0.1`` s, and
+    no faster than Eqs. (2)–(3) allow along the relaxed direction."""
     n = len(pos)
     vel_out, gaps = np.zeros((n, 2)), np.full(n, np.inf)
     for i in range(n):
         e = _desire_and_bodies(i, desired, pos, radius, walls)
-        e /= np.hypot(*e)
-        sp = np.hypot(*vel[i])
-        prev = vel[i] / sp if sp > 0.05 else e
-        e = prev + (e - prev) * min(1.0, dt / TAU_PLAIN)
-        e /= np.hypot(*e)
-        vel_out[i], gaps[i] = _walls_then_speed(i, e, pos, speed, radius, walls)
+        paper, _ = _walls_then_speed(i, e / np.hypot(*e), pos, speed, radius, walls)
+        relaxed = vel[i] + (paper - vel[i]) * min(1.0, dt / TAU_PLAIN)
+        d = relaxed / np.hypot(*relaxed)
+        allowed, gaps[i] = _speed_along(i, d, pos, speed, radius, walls)
+        vel_out[i] = min(np.hypot(*relaxed), np.hypot(*allowed)) * d
     return vel_out, gaps
 
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_plain_model_with_a_reaction_time_equals_the_loops(seed):
-    """``Motion`` without the crowd's velocities: the plain model whose direction relaxes (the
+    """``Motion`` without the crowd's velocities: the plain model whose velocity relaxes (the
     crowd step's, against the step-to-step swing of a dense queue). Same scenes and 1e-4 m/s
     tolerance as the anticipating reading (float32 against float64). Catches the relaxation
-    applied after the walls, from the wrong velocity, or not at all (premise below)."""
+    applied before the walls, from the wrong velocity, without the cap along the relaxed
+    direction, or not at all (premise below)."""
     pos, desired, speed, radius, walls = _scene(12, seed, spread=2.0)
     vel = _velocities(12, seed)
     dt = 1 / 30
@@ -438,6 +442,35 @@ def test_plain_model_with_a_reaction_time_equals_the_loops(seed):
     np.testing.assert_allclose(np.asarray(jitted), np.asarray(got_v), atol=1e-6)
     plain, _ = avoid(AvoidanceParams(), *f32[:4], cand, f32[4], wall_ids)
     assert np.abs(np.asarray(plain) - want_v).max() > 1e-2  # premise: the relaxation acts
+
+
+def test_a_relaxed_velocity_towards_a_neighbour_is_capped_along_its_own_direction():
+    """Agent 0 walked at 1.3 m/s straight at agent 1, now 5 cm beyond contact, and wants to go
+    sideways: the paper's velocity turns away at once, the relaxed one still points mostly at
+    agent 1 and must slow to what Eqs. (2)–(3) allow along it (the collision-free bound).
+    Same oracle and tolerance as above; the premise: without the cap it would walk on at
+    more than five times that."""
+    pos = np.array([[0.0, 0.0], [0.0, 0.45]])
+    desired = np.array([[1.0, 0.0], [0.0, 1.0]])
+    speed, radius = np.array([1.3, 1.3]), np.array([0.2, 0.2])
+    vel, walls = np.array([[0.0, 1.3], [0.0, 0.0]]), np.zeros((0, 2, 2))
+    want_v, want_gap = _oracle_reacting(pos, desired, speed, radius, walls, vel, 1 / 30)
+    f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, vel)]
+    got, gap = avoid(
+        AvoidanceParams(),
+        *f32[:4],
+        jnp.asarray([[1], [0]], jnp.int32),
+        jnp.zeros((0, 2, 2)),
+        jnp.zeros((2, 1), jnp.int32),
+        motion=Motion(f32[4], None, 1 / 30),
+    )
+    np.testing.assert_allclose(np.asarray(got), want_v, atol=1e-4)
+    np.testing.assert_allclose(float(gap[0]), want_gap[0], atol=1e-5)
+    e = _desire_and_bodies(0, desired, pos, radius, walls)
+    paper, _ = _walls_then_speed(0, e / np.hypot(*e), pos, speed, radius, walls)
+    relaxed = vel[0] + (paper - vel[0]) / 3
+    assert paper[1] < 0 < relaxed[1]  # premise: the relaxed velocity still points at agent 1
+    assert np.hypot(*relaxed) > 5 * np.hypot(*np.asarray(got)[0])  # premise: the cap binds
 
 
 def test_anticipating_overlapping_bodies_equal_the_reading():

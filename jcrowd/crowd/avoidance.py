@@ -48,15 +48,23 @@ Four changes of ours, each measured on the HERMES corridor runs and the bottlene
 A fifth, in the crowd step and the pedestrian step (given the last velocities; without them,
 as in the tests against the paper's equations, the model is the paper's):
 
-- **A reaction time**: the direction of Eq. (4) relaxes from the last velocity's,
-  ``e ← u(e' + (e − e') min(1, Δt/τ_p))`` with ``τ_p = 0.1`` s (the anticipation model's
-  relaxation, below, with a shorter time), before the walls act. The explicit step oscillates
-  in a dense queue — the repulsion and the desire win in turn — and on the Wuppertal entrance
-  the velocity's direction turned by 116° per frame at the median (p99 179°), so walkers
-  drawn on it could only skate or spin. With ``τ_p = 0.1`` s: 17° per frame. ``τ_p = 0.3`` s
-  (5° per frame) slowed the entrance to 82 s against the measured 64.5 s and thinned the
-  widest HERMES run by 35 %; at 0.1 s the entrance takes 71 s (1.02 /s against 1.16), every
-  HERMES density is within ±16 % and the speed error is 0.127 m/s (0.138 without).
+- **A reaction time**: the velocity relaxes from the last one towards the paper's,
+  ``v ← v' + (V(s(e)) e − v') min(1, Δt/τ_p)`` with ``τ_p = 0.1`` s (walls included in
+  ``e``), and then walks no faster than Eqs. (2)–(3) allow along its own direction,
+  ``|v| ≤ V(s(v/|v|))`` — so the collision-free bound holds for the relaxed velocity too.
+  The explicit step oscillates in a dense queue — the repulsion and the desire win in turn —
+  and on the Wuppertal entrance the velocity's direction turned by 116° per frame at the
+  median (p99 179°), so walkers drawn on it could only skate or spin. Relaxing the direction
+  alone (``e ← u(e' + (e − e') min(1, Δt/τ_p))``, 2026-12-03 a.m.) turned that into orbits:
+  the direction then turns at most 30° per frame at ``τ_p = 0.1`` s while the speed along it
+  stays free, and agents at the queue's edge circled at 1.34 m/s on loops of ~15 cm radius
+  (14k of the run's 79k agent-frames faster than 0.2 m/s were faster than 0.8 m/s). Relaxing
+  the velocity, a turn costs speed: 4.5k of 59k, the direction's change per frame at the
+  median 6° (17° relaxing the direction). ``τ_p = 0.3`` s slowed the entrance to 109 s
+  (measured 64.5 s), 0.5 s to 142 s; at 0.1 s see docs/crowd.md's validation table. Not the
+  anticipation model's relaxation, which stays on the direction.
+  Tried and dropped: keeping the direction in the desired half-plane (nobody pushed
+  backwards): the entrance jammed, 64 of 75 stuck.
 
 **Anticipation** (optional; ``[dynamics] model = "anticipation"``): the collision-free speed model
 lets counter-flowing groups jam head-on (each agent's repulsion points straight back at the agent it
@@ -339,23 +347,33 @@ def avoid_rows(
         sx, sz = _sideways(params, desired, motion, vj, valid, dx, dz, inv, size)
         # The reaction time relaxes the direction people choose; walls act at once.
         ex, ez = _react(params.reaction_time, motion, *_unit_xz(ex + sx, ez + sz))
-    elif motion is not None:  # the plain model with its reaction time
-        ex, ez = _react(params.plain_reaction_time, motion, *_unit_xz(ex, ez))
     wpush = params.wall_strength * jnp.exp((radius[:, None] - wd) / params.wall_range)
     wpush = jnp.where(wvalid, wpush, 0.0) * winv
     ex = ex + jnp.sum(wpush * wx, axis=1)
     ez = ez + jnp.sum(wpush * wz, axis=1)
     ex, ez = _unit_xz(ex, ez)
-    # Neighbour j relative to i is (−dx, −dz): ahead when e·(x_j − x_i) ≥ 0.
-    ahead = -(dx * ex[:, None] + dz * ez[:, None]) >= 0.0
-    lateral = jnp.abs(dx * ez[:, None] - dz * ex[:, None])
-    gap = jnp.min(jnp.where(valid & ahead & (lateral <= size), dist - size, jnp.inf), axis=1)
-    if wall_ids.shape[1]:  # walls ahead: neighbours of size 0 at their closest points
-        w_ahead = -(wx * ex[:, None] + wz * ez[:, None]) >= 0.0
-        w_lateral = jnp.abs(wx * ez[:, None] - wz * ex[:, None])
-        w_in = wvalid & w_ahead & (w_lateral <= radius[:, None])
-        gap = jnp.minimum(gap, jnp.min(jnp.where(w_in, wd - radius[:, None], jnp.inf), axis=1))
+
+    def spacing(ex: Array, ez: Array) -> Array:
+        """Eq. (3) along ``(ex, ez)``, walls ahead as neighbours of size 0 at their closest
+        points."""
+        # Neighbour j relative to i is (−dx, −dz): ahead when e·(x_j − x_i) ≥ 0.
+        ahead = -(dx * ex[:, None] + dz * ez[:, None]) >= 0.0
+        lateral = jnp.abs(dx * ez[:, None] - dz * ex[:, None])
+        gap = jnp.min(jnp.where(valid & ahead & (lateral <= size), dist - size, jnp.inf), axis=1)
+        if wall_ids.shape[1]:
+            w_ahead = -(wx * ex[:, None] + wz * ez[:, None]) >= 0.0
+            w_lateral = jnp.abs(wx * ez[:, None] - wz * ex[:, None])
+            w_in = wvalid & w_ahead & (w_lateral <= radius[:, None])
+            w_gap = jnp.min(jnp.where(w_in, wd - radius[:, None], jnp.inf), axis=1)
+            gap = jnp.minimum(gap, w_gap)
+        return gap
+
+    gap = spacing(ex, ez)
     v = optimal_velocity(params, speed, gap)
+    if motion is not None and motion.crowd is None:  # the plain model with its reaction time
+        ex, ez, v = _relax_velocity(params.plain_reaction_time, motion, ex, ez, v)
+        gap = spacing(ex, ez)
+        v = jnp.minimum(v, optimal_velocity(params, speed, gap))
     if horizon is not None:
         ahead_j = -(dx * ex[:, None] + dz * ez[:, None]) * inv  # cos to each neighbour
         cap = approach_cap(dist - size, ahead_j, valid, horizon)
@@ -488,6 +506,18 @@ def _react(tau: Array, motion: Motion, ex: Array, ez: Array) -> tuple[Array, Arr
     pz = jnp.where(moving, vz / jnp.maximum(sp, _TINY), ez)
     rate = jnp.minimum(1.0, motion.dt / tau)
     return _unit_xz(px + (ex - px) * rate, pz + (ez - pz) * rate)
+
+
+def _relax_velocity(
+    tau: Array, motion: Motion, ex: Array, ez: Array, v: Array
+) -> tuple[Array, Array, Array]:
+    """The velocity ``v·e`` relaxed from the last step's: ``v' + (v e − v') min(1, Δt/τ)``,
+    as its unit direction and speed."""
+    rate = jnp.minimum(1.0, motion.dt / tau)
+    rx = motion.own[:, 0] + (v * ex - motion.own[:, 0]) * rate
+    rz = motion.own[:, 1] + (v * ez - motion.own[:, 1]) * rate
+    ux, uz = _unit_xz(rx, rz)
+    return ux, uz, jnp.sqrt(rx * rx + rz * rz)
 
 
 def _unit_xz(ex: Array, ez: Array) -> tuple[Array, Array]:
