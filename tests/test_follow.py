@@ -22,6 +22,8 @@ from jcrowd.crowd import prepare
 from jcrowd.crowd.export import _pose_vectors
 from jcrowd.crowd.following import (
     FOLLOW_MAX_RATE,
+    SHUFFLE_BELOW,
+    SHUFFLE_CADENCE,
     STAND_APPROACH,
     STAND_BELOW,
     follow_phase,
@@ -65,8 +67,10 @@ def sim_state(model):
 def _oracle(tau, natural, walked, stride, dt, phases, last, mean_rate):
     """follow_phase case by case, one agent at a time (plain Python floats)."""
     rate = min(max(walked / max(stride, 1e-4), 0.0), FOLLOW_MAX_RATE * natural)
-    if walked >= STAND_BELOW * dt:
+    if walked >= SHUFFLE_BELOW * dt:
         return rate
+    if walked >= STAND_BELOW * dt:  # shuffling: at most SHUFFLE_CADENCE of the mean cadence
+        return min(rate, SHUFFLE_CADENCE * mean_rate)
     ahead = min(p - tau for p in [*phases, phases[0] + last] if p - tau >= -1e-3)
     ahead = max(ahead, 0.0)
     if ahead <= 1e-3:
@@ -83,10 +87,18 @@ def test_phase_follows_the_distance_walked_and_waits_at_double_support(sim_state
     n = 400
     tau = np.concatenate([[*cm.double_support, last, 0.0], rng.uniform(0, last, n - 4)])
     natural = rng.uniform(0.5, 1.5, n)
-    # Walking (up to 1.6 m/s), slow and standing still, in equal shares.
+    # Walking (up to 1.6 m/s), shuffling, slow and standing still.
     walked = rng.choice([0.0, 0.5 * STAND_BELOW * dt, 0.01, 0.05], n) * rng.uniform(0, 1, n)
+    shuffling = rng.uniform(STAND_BELOW * dt, SHUFFLE_BELOW * dt, n)
+    walked = np.where(rng.random(n) < 0.2, shuffling, walked)
     walked[:4] = 0.0
     stride = rng.uniform(0.005, 0.03, n)
+    # Where the time warp slows the clip's root (a 0.54 m cycle is 5.5 mm per aligned frame on
+    # average), a shuffle's walked / stride runs at walking cadence.
+    slow_root = rng.uniform(0.0005, 0.003, n)
+    stride = np.where(
+        walked < SHUFFLE_BELOW * dt, np.where(rng.random(n) < 0.5, slow_root, stride), stride
+    )
     got = np.asarray(
         follow_phase(cm, *(jnp.asarray(a, jnp.float32) for a in (tau, natural, walked, stride)), dt)
     )
@@ -102,6 +114,12 @@ def test_phase_follows_the_distance_walked_and_waits_at_double_support(sim_state
     for p in [*cm.double_support, cm.double_support[0] + last]:
         crossed = slow & (tau < p - 1e-3) & (after > p + 1e-4)
         assert not crossed.any()
+    # Property: nobody slower than SHUFFLE_BELOW steps at walking cadence (issue 19); the
+    # premise: for some of them walked / stride alone would have.
+    mean_rate = last * dt / cm.cycle_seconds
+    shuffle = (walked >= STAND_BELOW * dt) & (walked < SHUFFLE_BELOW * dt)
+    assert np.all(got[shuffle] <= SHUFFLE_CADENCE * mean_rate * (1 + 1e-5))
+    assert np.any(walked[shuffle] / stride[shuffle] > SHUFFLE_CADENCE * mean_rate)
     # A slow agent sitting on one waits.
     assert np.all(got[:2] == 0.0) and bool(np.all(stands_at(cm, jnp.asarray(tau[:2]))))
     jitted = jax.jit(lambda *a: follow_phase(cm, *a, dt))(

@@ -13,7 +13,15 @@ from jaxtyping import Array
 
 from jcrowd.crowd.clips import CrowdModel
 
-__all__ = ["FOLLOW_MAX_RATE", "STAND_APPROACH", "STAND_BELOW", "follow_phase", "stands_at"]
+__all__ = [
+    "FOLLOW_MAX_RATE",
+    "SHUFFLE_BELOW",
+    "SHUFFLE_CADENCE",
+    "STAND_APPROACH",
+    "STAND_BELOW",
+    "follow_phase",
+    "stands_at",
+]
 
 
 FOLLOW_MAX_RATE = 2.0
@@ -22,6 +30,18 @@ FOLLOW_MAX_RATE = 2.0
 STAND_BELOW = 0.1
 """With the dynamics on, an agent slower than this (m/s) stands: its phase goes on to the next
 double-support phase and waits there (:func:`follow_phase`)."""
+
+SHUFFLE_BELOW = 0.2
+"""With the dynamics on, an agent slower than this (m/s) but not standing shuffles: its phase
+runs at most :data:`SHUFFLE_CADENCE` times the model's mean cadence (issue 19: nobody walks in
+place at walking cadence below 0.2 m/s)."""
+
+SHUFFLE_CADENCE = 0.4
+"""The cap of a shuffling agent's cadence, as a fraction of the model's mean. Without it the
+phase follows ``walked / stride`` frame by frame, and the time warp makes the clip's root
+travel per aligned frame small in parts of the cycle, so a walker at 0.1–0.2 m/s stepped at
+0.5–1.4 times the mean cadence for a frame or two (0.9 % of the slow agent-frames of the
+entrance run, 2026-12-03). Capped, the root walks a little ahead of the feet there."""
 
 STAND_APPROACH = 0.35
 """On its way to stand, the phase runs at this fraction of the model's mean cadence (a cycle per
@@ -42,7 +62,8 @@ def follow_phase(
     (m) — the stance foot then stays where it was planted on a straight walk whatever the
     simulated speed; between 0 and :data:`FOLLOW_MAX_RATE` times ``natural``, the clip's own
     step ``dt·fps/ΔA``. Below the slowest captured cycle the stride stays that cycle's and the
-    cadence drops with the speed.
+    cadence drops with the speed; below :data:`SHUFFLE_BELOW` it is capped at
+    :data:`SHUFFLE_CADENCE` times the model's mean.
 
     Standing (slower than :data:`STAND_BELOW`): the phase goes on, at :data:`STAND_APPROACH`
     times the model's mean rate, to the clip's next double-support phase
@@ -55,6 +76,8 @@ def follow_phase(
     for p in _stand_phases(cm):
         ahead = jnp.where((p - tau >= -1e-3) & (p - tau < ahead), jnp.maximum(p - tau, 0.0), ahead)
     towards = jnp.minimum(STAND_APPROACH * (cm.frames - 1) * dt / cm.cycle_seconds, ahead)
+    shuffle = SHUFFLE_CADENCE * (cm.frames - 1) * dt / cm.cycle_seconds
+    rate = jnp.where(walked < SHUFFLE_BELOW * dt, jnp.minimum(rate, shuffle), rate)
     slow = walked < STAND_BELOW * dt
     return jnp.where(slow, jnp.where(ahead <= 1e-3, 0.0, towards), rate)
 
