@@ -334,7 +334,7 @@ TA, AA, DA, TAU, KEEP, WIDTH, WALKING = 1.0, 8.0, 0.1, 0.3, 0.05, 0.1, 0.3
 
 
 def _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt):
-    """The anticipating velocities as the avoidance module's docstring reads Xu, Chraibi &
+    """The anticipating velocities as jcrowd.crowd.reaction's docstring reads Xu, Chraibi &
     Seyfried (2021), float64 loops: the closest approach found by sampling the horizon finely
     (not the closed form), the side and weights written out per pair, then the reaction time,
     the walls and the speed of Eqs. (2)–(3)."""

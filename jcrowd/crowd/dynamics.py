@@ -82,10 +82,11 @@ class Pedestrians(eqx.Module):
         speed: ``(N,)`` free walking speed ``v0`` (m/s).
         radius: ``(N,)`` m.
         alive: ``(N,)``.
-        velocity: ``(N, 2)`` the last step's velocity (m/s); with it the direction relaxes
-            over the reaction time and, with ``anticipate``, agents anticipate
-            (:mod:`jcrowd.crowd.avoidance`); without it (``None``) the collision-free speed
-            model of the paper steps them, without a reaction time.
+        velocity: ``(N, 2)`` the last step's velocity (m/s); with it the velocity (plain)
+            or the direction (anticipating) relaxes over the reaction time and, with
+            ``anticipate``, agents anticipate (:mod:`jcrowd.crowd.reaction`); without it
+            (``None``) the collision-free speed model of the paper steps them, without a
+            reaction time.
         anticipate: with ``velocity``, the anticipation model (else the plain one).
     """
 
