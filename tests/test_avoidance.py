@@ -378,6 +378,16 @@ def _velocities(n, seed):
     return v
 
 
+def _every_pair(pos, desired, speed, radius, walls, vel):
+    """float32 inputs of :func:`avoid` where every agent is every other's candidate and every
+    wall each agent's: ``([pos, desired, speed, radius, walls, vel], candidates, wall ids)``."""
+    n = len(pos)
+    f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, walls, vel)]
+    cand = jnp.asarray([[j for j in range(n) if j != i] for i in range(n)], jnp.int32)
+    wall_ids = jnp.broadcast_to(jnp.arange(len(walls), dtype=jnp.int32), (n, len(walls)))
+    return f32, cand, wall_ids
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_anticipating_velocities_equal_the_reading(seed):
     """Random 12-agent scenes with random last velocities, every pair interacting. Tolerance
@@ -387,10 +397,7 @@ def test_anticipating_velocities_equal_the_reading(seed):
     vel = _velocities(12, seed)
     dt = 1 / 30
     want_v, _ = _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt)
-    n = len(pos)
-    f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, walls, vel)]
-    cand = jnp.asarray([[j for j in range(n) if j != i] for i in range(n)], jnp.int32)
-    wall_ids = jnp.broadcast_to(jnp.arange(len(walls), dtype=jnp.int32), (n, len(walls)))
+    f32, cand, wall_ids = _every_pair(pos, desired, speed, radius, walls, vel)
     motion = Motion(f32[5], f32[5], dt)
     got_v, _ = avoid(AvoidanceParams(), *f32[:4], cand, f32[4], wall_ids, motion=motion)
     np.testing.assert_allclose(np.asarray(got_v), want_v, atol=1e-4)
@@ -429,10 +436,7 @@ def test_plain_model_with_a_reaction_time_equals_the_loops(seed):
     vel = _velocities(12, seed)
     dt = 1 / 30
     want_v, _ = _oracle_reacting(pos, desired, speed, radius, walls, vel, dt)
-    n = len(pos)
-    f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, walls, vel)]
-    cand = jnp.asarray([[j for j in range(n) if j != i] for i in range(n)], jnp.int32)
-    wall_ids = jnp.broadcast_to(jnp.arange(len(walls), dtype=jnp.int32), (n, len(walls)))
+    f32, cand, wall_ids = _every_pair(pos, desired, speed, radius, walls, vel)
     motion = Motion(f32[5], None, dt)
     got_v, _ = avoid(AvoidanceParams(), *f32[:4], cand, f32[4], wall_ids, motion=motion)
     np.testing.assert_allclose(np.asarray(got_v), want_v, atol=1e-4)
@@ -592,11 +596,8 @@ def test_a_time_per_agent_equals_each_agents_own_step():
     differ)."""
     pos, desired, speed, radius, walls = _scene(10, 6, spread=2.0)
     vel = _velocities(10, 6)
-    n = len(pos)
-    f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, walls, vel)]
-    cand = jnp.asarray([[j for j in range(n) if j != i] for i in range(n)], jnp.int32)
-    wall_ids = jnp.broadcast_to(jnp.arange(len(walls), dtype=jnp.int32), (n, len(walls)))
-    times = jnp.where(jnp.arange(n) % 2 == 0, 0.1, 0.4).astype(jnp.float32)
+    f32, cand, wall_ids = _every_pair(pos, desired, speed, radius, walls, vel)
+    times = jnp.where(jnp.arange(len(pos)) % 2 == 0, 0.1, 0.4).astype(jnp.float32)
 
     def run(dt):
         v, _ = avoid(
