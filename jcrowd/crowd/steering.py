@@ -123,7 +123,7 @@ def steer(
     rows = jnp.arange(n, dtype=jnp.int32) if ids is None else ids
     cells = cell_list(grid, pos, live)
     motion = None
-    if previous is not None:  # the direction relaxes from the last velocity
+    if previous is not None:  # over the reaction time, from the last velocities
         elapsed = jnp.broadcast_to(jnp.asarray(dt, x.dtype), (n,))
         crowd_v = every[:, 4:6] if anticipate else None
         motion = Motion(jnp.stack([px, pz], axis=1), crowd_v, elapsed)
