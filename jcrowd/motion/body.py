@@ -1,0 +1,539 @@
+"""Skinned bodies: a rigged mesh bound to any skeleton, per-level weights, linear-blend skinning.
+
+The shipped body (``jcrowd/assets/body.jcb``, :func:`jcrowd.io.load_body`) is MakeHuman's base
+mesh with its ``cmu_mb`` rig: 31 bones named like the CMU MotionBuilder captures. Binding it to
+a motion model's skeleton (:func:`bind_body`) takes three steps.
+
+1. **Names** (:func:`map_bones`). Every rig bone belongs to a *part* (``spine``, ``left_thigh``,
+   …); a skeleton joint belongs to the part its name says under any convention in
+   :data:`PART_NAMES` (CMU MotionBuilder ``LeftUpLeg``, CMU ASF ``lfemur``, Mixamo
+   ``mixamorig:LeftUpLeg``, Unreal ``thigh_l``, …; case, separators and a ``prefix:`` ignored;
+   right-side names are the left ones mirrored). Within a part, joints and bones are paired by
+   position along the body (rest positions relative to the root, divided by the standing
+   height): a skeleton with one spine joint where the rig has three takes the one nearest to it.
+   Reading taken: a name says which part of the body a joint moves, and the rest pose says where
+   in that part it sits — the 19-joint ``cmu16`` skeleton's ``thorax`` sits 11 cm above its
+   pelvis, where the rig's ``LowerBack`` starts, not at the rig's ``Spine1`` (31 cm) that its
+   name corresponds to in the CMU conversion, and a trunk bent at the chest would fold the belly.
+   The pelvis, thighs, shins, feet, upper arms, forearms and head must be found; if one is not,
+   :class:`~jcrowd.errors.SkinError` names those parts and the skeleton's joints.
+2. **Weights.** A rig bone with no joint gives its weights to its nearest ancestor that has one
+   (``Neck`` → the chest); each vertex keeps its 4 largest weights, renormalised.
+3. **Rest pose** (the fit). The mesh is turned to face the skeleton's rest forward and scaled
+   by ``s``, the skeleton's root-to-ankle and root-to-head heights over the rig's. Each bound
+   bone ``b`` (joint ``j``) then gets an affine map ``A_b``: its rig joint goes to the skeleton's
+   rest joint, the rig's direction to its chain child (the next bound bone along the limb) turns
+   onto the skeleton's, and lengths along that direction scale by the ratio of the two bone
+   lengths (clamped to ``[0.6, 1.6]``; other directions by ``s``), so two bones meeting at a
+   joint agree there and the skin does not tear. A bone with no chain child (feet without toes,
+   the head, hands) keeps its parent's turn. The rest vertices are ``Σ_b w_b A_b v``: the mesh
+   standing in the skeleton's rest pose, bone directions and lengths.
+
+**Skinning** (:func:`skin`): ``v' = Σ_k w_k (R_k h l_k + p_k)`` over a vertex's four joints,
+with ``R_k, p_k`` the joint's global rotation and position (the step's FK, metres), ``h`` the
+agent's height (the motion model's skeleton is 1 m tall, :mod:`jcrowd.crowd.synthesis`) and
+``l_k`` the vertex in the joint's frame for a 1 m skeleton: at full detail ``v − p̄_k`` with
+``p̄_k`` the joint's rest position (:func:`rest_offsets`), so at the rest pose (``R = I``,
+``p = h p̄``) skinning returns ``h`` times the rest vertices.
+
+**Levels** (003 §5.1; :func:`level_skin`): a level that drops a joint freezes it, and the step
+places it rigidly in the frame of its nearest kept ancestor. Its weights move to that ancestor,
+and the vertex's offset into the ancestor's frame through the frozen joints, so the skin follows
+the dropped joint exactly where the level draws it; a vertex's entries for the same kept joint
+merge. No weight is left on a dropped joint.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from jaxtyping import Float, Int
+
+from jcrowd.errors import SkinError
+from jcrowd.motion.rotation import _xp, quat_rotate
+from jcrowd.motion.skeleton import Skeleton, rest_positions
+
+__all__ = [
+    "PART_NAMES",
+    "REQUIRED_PARTS",
+    "Body",
+    "BodyMesh",
+    "BoundBody",
+    "bind_body",
+    "level_skin",
+    "map_bones",
+    "rest_offsets",
+    "skin",
+]
+
+INFLUENCES = 4
+"""Joints per vertex."""
+
+_AXIAL_CLAMP = (0.6, 1.6)
+
+# Part of the body → rig bone names (CMU MotionBuilder, the shipped rig) and the joint names
+# other conventions use for it, left side; right-side entries are made by mirroring.
+PART_NAMES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "pelvis": (("Hips",), ("hips", "pelvis", "root", "hip")),
+    "left_hip": (("LHipJoint",), ("lhipjoint", "lefthipjoint")),
+    "left_thigh": (
+        ("LeftUpLeg",),
+        ("leftupleg", "lfemur", "leftthigh", "thighl", "lthigh", "leftupperleg", "upperlegl"),
+    ),
+    "left_shin": (
+        ("LeftLeg",),
+        (
+            "leftleg",
+            "ltibia",
+            "leftshin",
+            "calfl",
+            "lshin",
+            "leftlowerleg",
+            "lowerlegl",
+            "leftknee",
+        ),
+    ),
+    "left_foot": (("LeftFoot",), ("leftfoot", "lfoot", "footl", "leftankle")),
+    "left_toes": (("LeftToeBase",), ("lefttoebase", "ltoes", "lefttoe", "balll", "toesl", "ltoe")),
+    "spine": (
+        ("LowerBack", "Spine", "Spine1"),
+        (
+            "lowerback",
+            "upperback",
+            "spine",
+            "spine1",
+            "spine2",
+            "spine3",
+            "thorax",
+            "chest",
+            "abdomen",
+            "torso",
+            "spine01",
+            "spine02",
+            "spine03",
+            "upperchest",
+        ),
+    ),
+    "neck": (("Neck", "Neck1"), ("neck", "neck1", "lowerneck", "upperneck", "neck01")),
+    "head": (("Head",), ("head",)),
+    "left_collar": (("LeftShoulder",), ("leftshoulder", "lclavicle", "claviclel", "leftcollar")),
+    "left_upper_arm": (
+        ("LeftArm",),
+        ("leftarm", "lhumerus", "upperarml", "leftupperarm", "lshoulder", "luparm"),
+    ),
+    "left_forearm": (
+        ("LeftForeArm",),
+        ("leftforearm", "lradius", "lowerarml", "leftlowerarm", "lforearm", "leftelbow"),
+    ),
+    "left_hand": (
+        ("LeftHand", "LeftFingerBase"),
+        ("lefthand", "lwrist", "lhand", "handl", "leftwrist", "leftfingerbase"),
+    ),
+    "left_fingers": (
+        ("LeftHandFinger1",),
+        ("lefthandindex1", "lfingers", "lefthandfinger1", "indexl", "lindex"),
+    ),
+    "left_thumb": (("LThumb",), ("lthumb", "lefthandthumb1", "thumbl", "leftthumb")),
+}
+
+REQUIRED_PARTS = (
+    "pelvis",
+    "left_thigh",
+    "left_shin",
+    "left_foot",
+    "right_thigh",
+    "right_shin",
+    "right_foot",
+    "left_upper_arm",
+    "left_forearm",
+    "right_upper_arm",
+    "right_forearm",
+    "head",
+)
+"""Parts a skeleton must have for a body to follow it."""
+
+
+def _mirror(name: str) -> str:
+    """A left-side name turned right (``Left…``, ``L…``, ``l…``, ``…l``)."""
+    if name.startswith("Left"):
+        return "Right" + name[4:]
+    if name.startswith("left"):
+        return "right" + name[4:]
+    if name.startswith("L") and name[1:2].isupper():
+        return "R" + name[1:]
+    if name.startswith("l"):
+        return "r" + name[1:]
+    if name.endswith("l"):
+        return name[:-1] + "r"
+    return name
+
+
+def _parts() -> dict[str, tuple[tuple[str, ...], tuple[str, ...]]]:
+    out: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {}
+    for part, (bones, names) in PART_NAMES.items():
+        out[part] = (bones, names)
+        if part.startswith("left_"):
+            right = "right_" + part[5:]
+            out[right] = (tuple(_mirror(b) for b in bones), tuple(_mirror(n) for n in names))
+    return out
+
+
+_ALL_PARTS = _parts()
+
+
+def _normal_name(name: str) -> str:
+    """Lower case, a ``prefix:`` and separators dropped."""
+    return re.sub(r"[^a-z0-9]", "", name.split(":")[-1].lower())
+
+
+def _part_of_joint(name: str) -> str | None:
+    n = _normal_name(name)
+    for part, (_, names) in _ALL_PARTS.items():
+        if n in names:
+            return part
+    return None
+
+
+@dataclass(frozen=True)
+class BodyMesh:
+    """One resolution of a body: vertices, normals, triangles and 4 bone weights per vertex.
+
+    Attributes:
+        vertices, normals: ``(V, 3)`` float32 (metres in the rig's axes, or a bound body's rest).
+        triangles: ``(T, 3)`` int32 vertex indices.
+        bones: ``(V, 4)`` int bone (or joint) indices; weights ``(V, 4)`` float32 summing to 1.
+    """
+
+    vertices: Float[np.ndarray, "V 3"]
+    normals: Float[np.ndarray, "V 3"]
+    triangles: Int[np.ndarray, "T 3"]
+    bones: Int[np.ndarray, "V 4"]
+    weights: Float[np.ndarray, "V 4"]
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigged body: bone names and parents (parents first), each bone's joint (``heads``) and
+    tip (``tails``) at rest ``(B, 3)``, and its meshes from fine to coarse."""
+
+    bones: tuple[str, ...]
+    parents: tuple[int, ...]
+    heads: Float[np.ndarray, "B 3"]
+    tails: Float[np.ndarray, "B 3"]
+    meshes: tuple[BodyMesh, ...]
+
+
+@dataclass(frozen=True)
+class BoundBody:
+    """A body bound to a skeleton: meshes whose ``bones`` index the skeleton's joints and whose
+    vertices stand in the skeleton's rest pose for a 1 m skeleton (``rest`` the joints' rest
+    positions, ``(J, 3)``; ``scale`` the rig-to-skeleton factor ``s``; ``joint_of_bone`` each
+    rig bone's joint, -1 for none)."""
+
+    meshes: tuple[BodyMesh, ...]
+    rest: Float[np.ndarray, "J 3"]
+    joint_of_bone: Int[np.ndarray, " B"]
+    scale: float
+
+
+def _rest_unit(skeleton: Skeleton) -> tuple[np.ndarray, float]:
+    joints, ends = rest_positions(skeleton)
+    ys = np.concatenate([joints[:, 1], ends[:, 1]])
+    return joints, float(ys.max() - ys.min())
+
+
+def map_bones(body: Body, skeleton: Skeleton) -> Int[np.ndarray, " B"]:
+    """Each rig bone's skeleton joint (``-1``: none), by part names and rest positions (module
+    docstring, step 1)."""
+    joints, height = _rest_unit(skeleton)
+    rel_j = (joints - joints[0]) / max(height, 1e-9)
+    heads = np.asarray(body.heads, np.float64)
+    ys = np.concatenate([heads[:, 1], np.asarray(body.tails)[:, 1]])
+    rel_b = (heads - heads[0]) / max(float(ys.max() - ys.min()), 1e-9)
+    by_part: dict[str, list[int]] = {}
+    for j, name in enumerate(skeleton.names):
+        part = _part_of_joint(name)
+        if part is not None:
+            by_part.setdefault(part, []).append(j)
+    out = np.full(len(body.bones), -1, np.int64)
+    for part, (bone_names, _) in _ALL_PARTS.items():
+        cand = by_part.get(part, [])
+        bones = [body.bones.index(b) for b in bone_names if b in body.bones]
+        cand = list(cand)
+        # A joint named exactly like a bone takes it; the rest pair along the chain.
+        for j in list(cand):
+            same = [
+                b for b in bones if _normal_name(body.bones[b]) == _normal_name(skeleton.names[j])
+            ]
+            if same:
+                out[same[0]] = j
+                cand.remove(j)
+                bones.remove(same[0])
+        cost = np.linalg.norm(rel_j[cand][:, None, :] - rel_b[bones][None, :, :], axis=-1)
+        for k, m in _monotone_pairs(cost):
+            out[bones[m]] = cand[k]
+    found = {
+        p for p, (names, _) in _ALL_PARTS.items() for b in names if out[body.bones.index(b)] >= 0
+    }
+    missing = [p for p in REQUIRED_PARTS if p not in found]
+    if missing:
+        raise SkinError(
+            f"body: could not map the parts {missing} onto the skeleton's joints "
+            f"{list(skeleton.names)}; expected joint names like {_examples(missing)} "
+            "(jcrowd.motion.body.PART_NAMES lists the conventions understood)"
+        )
+    return out
+
+
+def _monotone_pairs(cost: np.ndarray) -> list[tuple[int, int]]:
+    """The order-keeping pairing of rows with columns (``min(rows, cols)`` pairs, each row and
+    column at most once, both increasing) of least total ``cost``: a joint chain of the spine
+    meets the rig's spine bottom to top, whatever their counts."""
+    m, n = cost.shape
+    if m == 0 or n == 0:
+        return []
+    if m > n:
+        return [(k, c) for c, k in _monotone_pairs(cost.T)]
+    # best[i, j]: least cost pairing rows[:i] into columns[:j] (every row paired).
+    best = np.full((m + 1, n + 1), np.inf)
+    best[0, :] = 0.0
+    for i in range(1, m + 1):
+        for j in range(i, n + 1):
+            best[i, j] = min(best[i, j - 1], best[i - 1, j - 1] + cost[i - 1, j - 1])
+    pairs, i, j = [], m, n
+    while i > 0:
+        if j > i and best[i, j] == best[i, j - 1]:
+            j -= 1
+        else:
+            pairs.append((i - 1, j - 1))
+            i, j = i - 1, j - 1
+    return pairs[::-1]
+
+
+def _examples(parts: list[str]) -> list[str]:
+    return [f"{_ALL_PARTS[p][0][0]}/{_ALL_PARTS[p][1][-1]}" for p in parts]
+
+
+def _owner(body: Body, joint_of_bone: np.ndarray) -> np.ndarray:
+    """Each bone's nearest bound ancestor (itself when bound)."""
+    owner = np.full(len(body.bones), -1, np.int64)
+    for b, p in enumerate(body.parents):
+        owner[b] = b if joint_of_bone[b] >= 0 else (owner[p] if p >= 0 else -1)
+    if (owner < 0).any():
+        raise SkinError(
+            f"body: bone {body.bones[int(np.argmax(owner < 0))]!r} has no bound ancestor"
+        )
+    return owner
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation matrix taking direction ``a`` onto ``b``."""
+    a = a / np.linalg.norm(a)
+    b = b / np.linalg.norm(b)
+    v, c = np.cross(a, b), float(a @ b)
+    if c < -1 + 1e-9:  # opposite: half a turn about any axis perpendicular to a
+        axis = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        axis /= np.linalg.norm(axis)
+        return 2 * np.outer(axis, axis) - np.eye(3)
+    k = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + k + k @ k / (1 + c)
+
+
+def _yaw_matrix(forward_from: np.ndarray, forward_to: np.ndarray) -> np.ndarray:
+    f0 = np.array([forward_from[0], 0.0, forward_from[2]])
+    f1 = np.array([forward_to[0], 0.0, forward_to[2]])
+    return _rotation_between(f0, f1)
+
+
+def _part_of_bone(name: str) -> str:
+    return next(p for p, (bones, _) in _ALL_PARTS.items() if name in bones)
+
+
+def _chain_child(body: Body, joint_of_bone: np.ndarray, b: int) -> int:
+    """The bound bone that continues bone ``b``'s chain, -1 for none: of the first bound bones
+    below ``b`` (through unbound ones), the only one, or where the chain branches the one in
+    ``b``'s own part, else the neck, else the head (a trunk continues up the spine, not into a
+    collarbone). The root has none (it turns as a whole)."""
+    if body.parents[b] < 0:
+        return -1
+    first, todo = [], [c for c, p in enumerate(body.parents) if p == b]
+    while todo:
+        c = todo.pop(0)
+        if joint_of_bone[c] >= 0:
+            first.append(c)
+        else:
+            todo += [k for k, p in enumerate(body.parents) if p == c]
+    if len(first) <= 1:
+        return first[0] if first else -1
+    parts = [_part_of_bone(body.bones[c]) for c in first]
+    for want in (_part_of_bone(body.bones[b]), "neck", "head"):
+        if want in parts:
+            return first[parts.index(want)]
+    return -1
+
+
+def bind_body(body: Body, skeleton: Skeleton, forward: np.ndarray | None = None) -> BoundBody:
+    """Bind ``body`` to ``skeleton`` (module docstring): meshes in the skeleton's rest pose for a
+    1 m skeleton, weighted to its joints. ``forward``: the skeleton's rest facing direction
+    (default ``+z``; :func:`jcrowd.motion.clip.rest_forward` gives it)."""
+    jb = map_bones(body, skeleton)
+    owner = _owner(body, jb)
+    joints, height = _rest_unit(skeleton)
+    rest = joints / height  # the model's skeletons are 1 m tall; others are normalised here
+    heads = np.asarray(body.heads, np.float64)
+    turn = _yaw_matrix(
+        np.array([0.0, 0.0, 1.0]), np.asarray(forward if forward is not None else [0, 0, 1.0])
+    )
+    heads = heads @ turn.T
+
+    def part_bone(part: str) -> int:
+        return body.bones.index(_ALL_PARTS[part][0][0])
+
+    pelvis, foot, head = part_bone("pelvis"), part_bone("left_foot"), part_bone("head")
+    rig_span = (heads[pelvis, 1] - heads[foot, 1]) + (heads[head, 1] - heads[pelvis, 1])
+    sk = rest
+    sk_span = (sk[jb[pelvis], 1] - sk[jb[foot], 1]) + (sk[jb[head], 1] - sk[jb[pelvis], 1])
+    s = float(sk_span / rig_span)
+
+    maps = _bone_maps(body, jb, heads, rest, s)
+    meshes = []
+    for mesh in body.meshes:
+        v = np.asarray(mesh.vertices, np.float64) @ turn.T
+        n = np.asarray(mesh.normals, np.float64) @ turn.T
+        own = owner[np.asarray(mesh.bones, np.int64)]  # (V, 4) bound bones
+        w = np.asarray(mesh.weights, np.float64)
+        out = np.zeros_like(v)
+        nout = np.zeros_like(n)
+        for k in range(INFLUENCES):
+            for b in np.unique(own[:, k]):
+                sel = own[:, k] == b
+                lin, h0, h1 = maps[int(b)]
+                out[sel] += w[sel, k, None] * ((v[sel] - h0) @ lin.T + h1)
+                nout[sel] += w[sel, k, None] * (n[sel] @ np.linalg.inv(lin))
+        nout /= np.maximum(np.linalg.norm(nout, axis=1, keepdims=True), 1e-12)
+        joint_ids, joint_w = _merge(jb[own], w)
+        meshes.append(
+            BodyMesh(
+                out.astype(np.float32),
+                nout.astype(np.float32),
+                np.asarray(mesh.triangles, np.int32),
+                joint_ids,
+                joint_w,
+            )
+        )
+    return BoundBody(tuple(meshes), rest.astype(np.float32), jb, s)
+
+
+def _bone_maps(
+    body: Body, jb: np.ndarray, heads: np.ndarray, rest: np.ndarray, s: float
+) -> dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Each bound bone's affine map ``x ↦ M (x − a) + b`` from the (turned) rig onto the
+    skeleton's rest pose, as ``(M, a, b)`` (module docstring, step 3)."""
+    sk = rest
+    # Affine map per bound bone: x ↦ M (x − head_rig) + head_skel.
+    maps: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    for b in range(len(body.bones)):
+        if jb[b] < 0:
+            continue
+        j = int(jb[b])
+        c = _chain_child(body, jb, b)
+        if c >= 0:
+            d_rig = heads[c] - heads[b]
+            d_sk = sk[jb[c]] - sk[j]
+            if np.linalg.norm(d_rig) > 1e-6 and np.linalg.norm(d_sk) > 1e-6:
+                rot = _rotation_between(d_rig, d_sk)
+                ratio = np.linalg.norm(d_sk) / (s * np.linalg.norm(d_rig))
+                axial = float(np.clip(ratio, *_AXIAL_CLAMP))
+                u = d_rig / np.linalg.norm(d_rig)
+                stretch = s * (np.eye(3) + (axial - 1.0) * np.outer(u, u))
+                maps[b] = (rot @ stretch, heads[b], sk[j])
+                continue
+        p = body.parents[b]
+        while p >= 0 and p not in maps:
+            p = body.parents[p]
+        lin = s * np.eye(3) if p < 0 else maps[p][0] / np.cbrt(abs(np.linalg.det(maps[p][0]))) * s
+        maps[b] = (lin, heads[b], sk[j])
+
+    return maps
+
+
+def _merge(ids: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per vertex, the entries for the same joint summed and the four largest kept, largest
+    first (unused slots point at the main joint with weight 0), renormalised to sum to 1."""
+    v = ids.shape[0]
+    dense = np.zeros((v, int(ids.max()) + 1))
+    np.add.at(dense, (np.repeat(np.arange(v), ids.shape[1]), ids.ravel()), w.ravel())
+    out_ids = np.argsort(-dense, axis=1, kind="stable")[:, :INFLUENCES]
+    out_w = np.take_along_axis(dense, out_ids, axis=1)
+    if out_ids.shape[1] < INFLUENCES:  # fewer joints than influences
+        pad = INFLUENCES - out_ids.shape[1]
+        out_ids = np.concatenate([out_ids, np.repeat(out_ids[:, :1], pad, axis=1)], axis=1)
+        out_w = np.concatenate([out_w, np.zeros((v, pad))], axis=1)
+    out_ids = np.where(out_w > 0, out_ids, out_ids[:, :1])
+    out_w = out_w / np.maximum(out_w.sum(axis=1, keepdims=True), 1e-12)
+    return out_ids.astype(np.int32), out_w.astype(np.float32)
+
+
+def rest_offsets(mesh: BodyMesh, rest: Float[np.ndarray, "J 3"]) -> Float[np.ndarray, "V 4 3"]:
+    """A bound mesh's vertices in each of its joints' rest frames, ``v − p̄_k`` ``(V, 4, 3)``:
+    what :func:`skin` moves at full detail."""
+    v = np.asarray(mesh.vertices, np.float64)
+    return (v[:, None, :] - np.asarray(rest, np.float64)[np.asarray(mesh.bones)]).astype(np.float32)
+
+
+def level_skin(
+    mesh: BodyMesh,
+    rest: Float[np.ndarray, "J 3"],
+    anchor: Int[np.ndarray, " J"],
+    frame_rotation: Float[np.ndarray, "J 4"],
+    frame_position: Float[np.ndarray, "J 3"],
+) -> tuple[Int[np.ndarray, "V 4"], Float[np.ndarray, "V 4"], Float[np.ndarray, "V 4 3"]]:
+    """A bound mesh at a level of detail that keeps some joints (003 §5.1).
+
+    ``anchor[j]``: the kept joint (an index among the level's kept joints) whose frame carries
+    joint ``j``; ``frame_rotation[j]``, ``frame_position[j]``: ``j``'s frame in its anchor's when
+    the joints in between hold their frozen rotations (identity and 0 for a kept joint), for a
+    1 m skeleton. Each weight moves to the anchor, the vertex's offset into the anchor's frame
+    (``C_j (v − p̄_j) + o_j``), so a vertex follows a dropped joint exactly as the level places
+    that joint; entries for the same anchor merge (weights summed, offsets weight-averaged).
+    Returns ``(kept joint ids (V, 4), weights (V, 4), offsets (V, 4, 3))`` for :func:`skin`.
+    """
+    ids = np.asarray(mesh.bones, np.int64)
+    w = np.asarray(mesh.weights, np.float64)
+    local = rest_offsets(mesh, rest).astype(np.float64)
+    rot = np.asarray(frame_rotation, np.float64)[ids]
+    moved = quat_rotate(rot, local) + np.asarray(frame_position, np.float64)[ids]
+    new_ids, new_w = _merge(np.asarray(anchor, np.int64)[ids], w)
+    v = ids.shape[0]
+    out = np.zeros((v, INFLUENCES, 3))
+    for m in range(INFLUENCES):
+        same = np.asarray(anchor, np.int64)[ids] == new_ids[:, m : m + 1]  # (V, 4)
+        ws = np.where(same, w, 0.0)
+        total = ws.sum(axis=1, keepdims=True)
+        out[:, m] = np.einsum("vk,vkc->vc", ws, moved) / np.maximum(total, 1e-12)
+        # An unused slot (weight 0) copies the main joint's offset: harmless, and finite.
+        out[:, m] = np.where(total > 0, out[:, m], out[:, 0])
+    return new_ids.astype(np.int32), new_w, out.astype(np.float32)
+
+
+def skin(
+    bones: Int[Any, "V 4"],
+    weights: Float[Any, "V 4"],
+    offsets: Float[Any, "V 4 3"],
+    rotations: Float[Any, "*batch K 4"],
+    positions: Float[Any, "*batch K 3"],
+    height: Float[Any, "*batch"] | float = 1.0,
+) -> Float[Any, "*batch V 3"]:
+    """Linear-blend skinning ``v' = Σ_k w_k (R_k h l_k + p_k)`` (module docstring) with ``l_k``
+    a vertex's offset in its ``k``-th joint's frame (:func:`rest_offsets`, :func:`level_skin`),
+    ``R_k, p_k`` that joint's global rotation and position (m), ``h`` the agent's height. NumPy
+    in gives NumPy out, otherwise jax arrays."""
+    xp = _xp(rotations, positions)
+    h = xp.asarray(height, dtype=positions.dtype)[..., None, None, None]
+    b = np.asarray(bones)
+    moved = quat_rotate(rotations[..., b, :], h * xp.asarray(offsets, dtype=positions.dtype))
+    moved = moved + positions[..., b, :]
+    return xp.sum(xp.asarray(weights, dtype=positions.dtype)[..., None] * moved, axis=-2)
