@@ -18,6 +18,7 @@ from jcrowd.motion.body import (
     Body,
     BodyMesh,
     bind_body,
+    frames_from_points,
     level_skin,
     map_bones,
     rest_offsets,
@@ -363,3 +364,60 @@ def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
             ]
         ]
     )
+
+
+# -- frames from the step's points --------------------------------------------------------------
+
+
+def test_frames_from_points_recover_the_level_fk(body: Body) -> None:
+    """At the coarsest and the finest level: a pose whose joints do not twist about a lone
+    bone (deviations from the reference perpendicular to it) is recovered exactly from the
+    points the level places — rotations to 1e-4 (float32 points), and the skin on the recovered
+    frames equals the skin on the FK's own to 1e-5 m."""
+    from jcrowd.crowd.bodies import skinned_levels
+    from jcrowd.crowd.synthesis import build_decoders, level_points
+    from jcrowd.motion.rotation import quat_mul, yaw_quat
+
+    model = load_default_model()
+    bound = bind_body(body, model.skeleton)
+    dec = build_decoders(model)
+    levels = skinned_levels(model, bound, decoders=dec)
+    for lv in (0, len(levels) - 1):
+        sl, ld = levels[lv], dec.levels[lv]
+        kk = len(sl.kept)
+        e = RNG.normal(scale=0.4, size=(kk, 3))
+        for k in range(kk):
+            o = sl.ref_offsets[k][sl.ref_points[k] >= 0]
+            if len(o) and np.linalg.matrix_rank(o, tol=1e-4) == 1:
+                axis = o[np.argmax(np.linalg.norm(o, axis=1))] / np.linalg.norm(o).max()
+                axis = axis / np.linalg.norm(axis)
+                e[k] -= (e[k] @ axis) * axis
+        y = np.zeros(ld.u_pose.shape[0], np.float32)
+        y[0] = 0.55
+        y[4:7] = e[0]
+        y[7 : 7 + 3 * (kk - 1)] = e[1:].ravel()
+        heading, h = 0.7, 1.74
+        pts = np.asarray(level_points(ld, jnp.asarray(y), jnp.asarray([2.0, -1.0]), heading, h))
+        root = quat_mul(np.asarray(yaw_quat(heading)), np.asarray(quat_from_expmap(e[0])))
+        local = np.concatenate(
+            [
+                root[None],
+                np.asarray(quat_mul(np.asarray(ld.local_ref[1:]), quat_from_expmap(e[1:]))),
+            ]
+        )
+        want_rot, _ = forward_kinematics(
+            ld.skeleton, jnp.asarray(local, jnp.float32), jnp.zeros(3, jnp.float32)
+        )
+        want_rot = np.asarray(want_rot, np.float64)
+        rot, pos = frames_from_points(sl, pts[None], np.array([h]))
+        for k in range(kk):
+            np.testing.assert_allclose(rot[0, k], _mat(want_rot[k]), atol=1e-4)
+        np.testing.assert_allclose(pos[0], pts[sl.kept], atol=0)
+        want_q = np.asarray(want_rot)[None]
+        got = skin(sl.bones, sl.weights, sl.offsets, _to_quat(rot), pos, h)
+        ref = skin(sl.bones, sl.weights, sl.offsets, want_q, pos, h)
+        np.testing.assert_allclose(got, ref, atol=1e-5)
+
+
+def _to_quat(rot: np.ndarray) -> np.ndarray:
+    return np.asarray(quat_from_matrix(rot))

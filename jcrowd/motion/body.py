@@ -62,7 +62,9 @@ __all__ = [
     "Body",
     "BodyMesh",
     "BoundBody",
+    "SkinnedLevel",
     "bind_body",
+    "frames_from_points",
     "level_skin",
     "map_bones",
     "rest_offsets",
@@ -537,3 +539,108 @@ def skin(
     moved = quat_rotate(rotations[..., b, :], h * xp.asarray(offsets, dtype=positions.dtype))
     moved = moved + positions[..., b, :]
     return xp.sum(xp.asarray(weights, dtype=positions.dtype)[..., None] * moved, axis=-2)
+
+
+@dataclass(frozen=True)
+class SkinnedLevel:
+    """What a renderer needs to draw one level of detail as skinned bodies: the mesh, skinned
+    to the level's kept joints (:func:`level_skin`), and how to find those joints' frames in
+    the points the step outputs (:func:`frames_from_points`).
+
+    Attributes:
+        triangles: ``(T, 3)`` int32; normals ``(V, 3)`` at rest.
+        bones, weights, offsets: :func:`level_skin`'s ``(V, 4)``, ``(V, 4)``, ``(V, 4, 3)``.
+        kept: ``(K,)`` the output point each kept joint is; parents ``(K,)`` kept parents (-1
+            for the root), parents first.
+        local_ref: ``(K, 4)`` each kept joint's rotation in its kept parent's frame when its
+            own pose is the reference (the identity for the root).
+        ref_points: ``(K, M)`` the output points carried rigidly by each kept joint's frame
+            (its kept children, the dropped joints and End Sites anchored at it; ``-1`` pads),
+            ref_offsets ``(K, M, 3)`` those points in the joint's frame for a 1 m skeleton.
+    """
+
+    triangles: Int[np.ndarray, "T 3"]
+    normals: Float[np.ndarray, "V 3"]
+    bones: Int[np.ndarray, "V 4"]
+    weights: Float[np.ndarray, "V 4"]
+    offsets: Float[np.ndarray, "V 4 3"]
+    kept: Int[np.ndarray, " K"]
+    parents: tuple[int, ...]
+    local_ref: Float[np.ndarray, "K 4"]
+    ref_points: Int[np.ndarray, "K M"]
+    ref_offsets: Float[np.ndarray, "K M 3"]
+
+
+def _quat_matrix(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = (q[..., i] for i in range(4))
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(N, 3, 3)``: the least rotation taking unit vectors ``a`` onto ``b`` (``(N, 3)``)."""
+    v = np.cross(a, b)
+    c = np.sum(a * b, axis=-1)
+    k = np.zeros((len(a), 3, 3))
+    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    k[:, 1, 0], k[:, 2, 0], k[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    # Opposite directions (c ≈ −1) have no least rotation; they do not occur between a joint's
+    # reference and its pose in a walk, and are left unturned here.
+    scale = np.where(c > -1 + 1e-6, 1.0 / (1.0 + np.maximum(c, -1 + 1e-6)), 0.0)
+    out = np.eye(3) + k + (k @ k) * scale[:, None, None]
+    return np.where((c > -1 + 1e-6)[:, None, None], out, np.eye(3))
+
+
+def frames_from_points(
+    level: SkinnedLevel, points: Float[np.ndarray, "N P 3"], height: Float[np.ndarray, " N"]
+) -> tuple[Float[np.ndarray, "N K 3 3"], Float[np.ndarray, "N K 3"]]:
+    """The kept joints' global rotations and positions from the points a level places.
+
+    Each kept joint's frame carries some points rigidly (:class:`SkinnedLevel`): its rotation
+    is the one taking their offsets onto where they are (the orthogonal Procrustes solution,
+    by SVD) when the offsets span a plane. When they lie on one line (a thigh carries only the
+    knee), the turn about that line is not in the points: it is taken as the joint's reference
+    turn in its parent's frame, and the least rotation takes the line onto its posed direction
+    (so a pose whose deviations from the reference do not twist about the bone is found
+    exactly). A joint carrying no point keeps its reference turn. The positions are the points
+    the kept joints are.
+    """
+    pts = np.asarray(points, np.float64)
+    h = np.maximum(np.asarray(height, np.float64), 1e-9)
+    n, k = pts.shape[0], len(level.kept)
+    rot = np.zeros((n, k, 3, 3))
+    pos = pts[:, level.kept]
+    local = _quat_matrix(np.asarray(level.local_ref, np.float64))
+    for j in range(k):
+        p = level.parents[j]
+        ref = local[j] if p < 0 else rot[:, p] @ local[j]
+        ref = np.broadcast_to(ref, (n, 3, 3))
+        ids = level.ref_points[j]
+        use = ids >= 0
+        o = np.asarray(level.ref_offsets[j], np.float64)[use]
+        if not use.any():
+            rot[:, j] = ref
+            continue
+        d = (pts[:, ids[use]] - pos[:, j, None]) / h[:, None, None]  # (N, M, 3)
+        if np.linalg.matrix_rank(o, tol=1e-4) >= 2:
+            cov = np.einsum("mi,nmj->nij", o, d)  # Σ o dᵀ
+            u, _, vt = np.linalg.svd(cov)
+            sign = np.sign(np.linalg.det(np.swapaxes(vt, 1, 2) @ np.swapaxes(u, 1, 2)))
+            fix = np.ones((n, 3))
+            fix[:, 2] = np.where(sign == 0, 1.0, sign)
+            rot[:, j] = np.swapaxes(vt, 1, 2) @ (fix[:, :, None] * np.swapaxes(u, 1, 2))
+        else:
+            axis = o[np.argmax(np.linalg.norm(o, axis=1))]
+            sign = np.sign(o @ axis)[None, :, None]
+            target = np.sum(sign * d, axis=1)
+            posed = ref @ (axis / np.linalg.norm(axis))
+            tn = np.linalg.norm(target, axis=1, keepdims=True)
+            target = np.where(tn > 1e-9, target / np.maximum(tn, 1e-9), posed)
+            rot[:, j] = _swing(posed, target) @ ref
+    return rot, pos
