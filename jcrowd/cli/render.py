@@ -30,7 +30,18 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="out.mp4, out.gif or a folder for PNG frames")
     p.add_argument("--size", help="WIDTHxHEIGHT (default: the scenario camera's)")
     p.add_argument("--frames", type=int, help="frames to render (default: all)")
-    p.add_argument("--color-by", choices=("level", "group"), default="level")
+    p.add_argument(
+        "--style",
+        choices=("body", "capsules"),
+        default="body",
+        help="skinned bodies (default) or capsules round the bones (a debug view)",
+    )
+    p.add_argument(
+        "--color-by",
+        choices=("level", "group", "tint"),
+        default="tint",
+        help="bodies' clothes (or capsules) by level of detail, by group, or varied per agent",
+    )
     p.add_argument("--model", help="model file for a scenario (default: the scenario's)")
     p.add_argument(
         "--eye", help="X,Y,Z: a scenario seen from this fixed camera instead (m; with --target)"
@@ -121,12 +132,35 @@ def _view(scenario: Any, t: float) -> Any:
     return View(tuple(eye), tuple(target), fov_deg=cam.fov_deg, near=cam.near, far=cam.far)
 
 
-def _colors(color_by: str, level: int, ids: np.ndarray, group_colors: np.ndarray) -> np.ndarray:
+def _colors(
+    color_by: str, level: int, ids: np.ndarray, group_colors: np.ndarray, tints: Any = None
+) -> np.ndarray:
+    """Colours of the agents ``ids`` (slots past the end take the last agent's): by level, by
+    group, or their tint (``(n, 3, 3)`` skin, top, bottom; capsules take the top)."""
     from jcrowd.render import LEVEL_COLORS
 
     if color_by == "group":
         return group_colors[np.minimum(ids, len(group_colors) - 1)]
+    if color_by == "tint" and tints is not None:
+        return tints[np.minimum(ids, len(tints) - 1)]
     return np.broadcast_to(np.asarray(LEVEL_COLORS[level], np.float32), (len(ids), 3))
+
+
+def _for_capsules(colors: np.ndarray) -> np.ndarray:
+    """A capsule takes one colour per agent: the top of a ``(n, 3, 3)`` tint."""
+    return colors[:, 1] if colors.ndim == 3 else colors
+
+
+def body_levels(model: Any, decoders: Any = None) -> tuple[Any, ...]:
+    """The shipped body bound to ``model``'s skeleton, one skinned mesh per level."""
+    from jcrowd.crowd.bodies import skinned_levels
+    from jcrowd.io.body_file import load_body
+    from jcrowd.io.resources import body_path
+    from jcrowd.motion.body import bind_body
+    from jcrowd.motion.clip import rest_forward
+
+    bound = bind_body(load_body(body_path()), model.skeleton, rest_forward(model.skeleton))
+    return skinned_levels(model, bound, decoders=decoders)
 
 
 DOT_PARENTS = (-1, 0)
@@ -160,6 +194,7 @@ def render_scenario(
     frames: int | None,
     color_by: str,
     still: str | None = None,
+    style: str = "body",
 ) -> dict[str, Any]:
     """Step and draw ``scenario``; write the clip (and optionally one PNG still)."""
     import jax
@@ -170,8 +205,10 @@ def render_scenario(
     from jcrowd.crowd.simulate import prepare
     from jcrowd.crowd.synthesis import point_parents
     from jcrowd.render import CrowdRenderer, LevelInstances, write_png
+    from jcrowd.render.bodies import tint_palette
 
     sim, state = prepare(scenario, model)
+    bodies = body_levels(model, sim.crowd.decoders) if style == "body" else None
     state = shard_state(state)  # one block of agents per device (unchanged on one device)
     fn = sim.compiled()
     n_frames = sim.steps if frames is None else frames
@@ -179,6 +216,7 @@ def render_scenario(
     group_colors = np.asarray(sim.spawn.color, np.float32)
     n = sim.num_agents
     heights = np.asarray(sim.spawn.height, np.float32)
+    tints = tint_palette(n)
     t0 = time.perf_counter()
     warm = jax.tree.map(jax.numpy.copy, state)  # the step donates its input state
     _, first = jax.block_until_ready(fn(warm, sim.view_at(0.0), sim.dt_array))
@@ -197,6 +235,8 @@ def render_scenario(
                 *size,
                 capacity=(*caps, n),
                 obstacles=scenario_obstacles(scenario),
+                bodies=None if bodies is None else [*bodies, None],
+                sky=bodies is not None,
             ) as renderer,
             Progress(console=Console(file=sys.stderr), transient=True) as bar,
         ):
@@ -211,16 +251,19 @@ def render_scenario(
                 dots = in_agent_order(frame.dots, state)
                 step_ms.append(1e3 * (time.perf_counter() - t))
                 t = time.perf_counter()
-                levels = [
-                    LevelInstances(pts, valid, _colors(color_by, lv, slots, group_colors))
-                    for lv, (slots, valid, pts) in enumerate(zip(*host, strict=True))
-                ]
+                levels = []
+                for lv, (slots, valid, pts) in enumerate(zip(*host, strict=True)):
+                    cols = _colors(color_by, lv, slots, group_colors, tints)
+                    if bodies is None:
+                        cols = _for_capsules(cols)
+                    tall = heights[np.minimum(slots, n - 1)]
+                    levels.append(LevelInstances(pts, valid, cols, tall))
                 ids = np.arange(n)
                 levels.append(
                     LevelInstances(
                         _dot_sticks(xz, heights),
                         dots,
-                        _colors(color_by, len(caps), ids, group_colors),
+                        _for_capsules(_colors(color_by, len(caps), ids, group_colors, tints)),
                     )
                 )
                 image = renderer.render(_view(scenario, i * sim.dt), levels)
@@ -328,7 +371,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         scenario = fixed_camera(load_scenario(args.source), args.eye, args.target)
         model, _ = load_model(scenario, args.model)
         size = parse_size(args.size, (scenario.camera.width, scenario.camera.height))
-        result = render_scenario(scenario, model, args.out, size, args.frames, args.color_by)
+        result = render_scenario(
+            scenario, model, args.out, size, args.frames, args.color_by, style=args.style
+        )
     emit(result, args.json, _print)
     return result
 

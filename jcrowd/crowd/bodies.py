@@ -77,6 +77,9 @@ def skinned_levels(
                 local_ref=np.asarray(level.local_ref, np.float64),
                 ref_points=ref_points,
                 ref_offsets=ref_offsets,
+                region=(
+                    np.full(len(mesh.vertices), 1, np.int8) if mesh.region is None else mesh.region
+                ),
             )
         )
     return tuple(out)

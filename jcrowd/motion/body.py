@@ -8,19 +8,21 @@ a motion model's skeleton (:func:`bind_body`) takes three steps.
    …); a skeleton joint belongs to the part its name says under any convention in
    :data:`PART_NAMES` (CMU MotionBuilder ``LeftUpLeg``, CMU ASF ``lfemur``, Mixamo
    ``mixamorig:LeftUpLeg``, Unreal ``thigh_l``, …; case, separators and a ``prefix:`` ignored;
-   right-side names are the left ones mirrored). Within a part, joints and bones are paired by
-   position along the body (rest positions relative to the root, divided by the standing
-   height): a skeleton with one spine joint where the rig has three takes the one nearest to it.
-   Reading taken: a name says which part of the body a joint moves, and the rest pose says where
-   in that part it sits — the 19-joint ``cmu16`` skeleton's ``thorax`` sits 11 cm above its
-   pelvis, where the rig's ``LowerBack`` starts, not at the rig's ``Spine1`` (31 cm) that its
-   name corresponds to in the CMU conversion, and a trunk bent at the chest would fold the belly.
+   right-side names are the left ones mirrored). Within a part, joints and bones are paired in
+   chain order by rest position
+   (relative to the root, the rig scaled by the ratio of the two legs' heights): a skeleton
+   with one spine joint where the rig has three takes the one nearest to it. Reading taken: a
+   name says which part of the body a joint moves, and the rest pose says where in that part it
+   sits. The 19-joint ``cmu16`` skeleton's ``thorax`` sits 11 cm above its pelvis, where the
+   rig's ``LowerBack`` starts (not at ``Spine1``, which its name is in the CMU conversion: a
+   trunk bent at the chest would fold the belly), and its ``head`` at the base of the neck
+   (its End Site 5 cm above), where the rig's ``Neck`` starts: the neck and head are one part.
    The pelvis, thighs, shins, feet, upper arms, forearms and head must be found; if one is not,
    :class:`~jcrowd.errors.SkinError` names those parts and the skeleton's joints.
 2. **Weights.** A rig bone with no joint gives its weights to its nearest ancestor that has one
-   (``Neck`` → the chest); each vertex keeps its 4 largest weights, renormalised.
+   (``cmu16``: ``Head`` → its ``head``, ``Spine1`` → its ``thorax``); each vertex keeps its 4 largest weights, renormalised.
 3. **Rest pose** (the fit). The mesh is turned to face the skeleton's rest forward and scaled
-   by ``s``, the skeleton's root-to-ankle and root-to-head heights over the rig's. Each bound
+   by ``s``, the skeleton's root-to-ankle height over the rig's. Each bound
    bone ``b`` (joint ``j``) then gets an affine map ``A_b``: its rig joint goes to the skeleton's
    rest joint, the rig's direction to its chain child (the next bound bone along the limb) turns
    onto the skeleton's, and lengths along that direction scale by the ratio of the two bone
@@ -62,6 +64,10 @@ __all__ = [
     "Body",
     "BodyMesh",
     "BoundBody",
+    "BOTTOM",
+    "SHOES",
+    "SKIN",
+    "TOP",
     "SkinnedLevel",
     "bind_body",
     "frames_from_points",
@@ -119,8 +125,10 @@ PART_NAMES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
             "upperchest",
         ),
     ),
-    "neck": (("Neck", "Neck1"), ("neck", "neck1", "lowerneck", "upperneck", "neck01")),
-    "head": (("Head",), ("head",)),
+    "head": (
+        ("Neck", "Neck1", "Head"),
+        ("neck", "neck1", "lowerneck", "upperneck", "neck01", "head"),
+    ),
     "left_collar": (("LeftShoulder",), ("leftshoulder", "lclavicle", "claviclel", "leftcollar")),
     "left_upper_arm": (
         ("LeftArm",),
@@ -214,6 +222,32 @@ class BodyMesh:
     triangles: Int[np.ndarray, "T 3"]
     bones: Int[np.ndarray, "V 4"]
     weights: Float[np.ndarray, "V 4"]
+    region: Int[np.ndarray, " V"] | None = None
+
+
+SKIN, TOP, BOTTOM, SHOES = 0, 1, 2, 3
+"""Clothing regions of a bound mesh's vertices (:attr:`BodyMesh.region`), from the part of
+the body its strongest rig bone moves: skin (head, neck, hands), top (trunk, collars, arms),
+bottom (pelvis, legs), shoes (feet, toes)."""
+
+_REGION_OF_PART = {
+    "head": SKIN,
+    "spine": TOP,
+    "pelvis": BOTTOM,
+}
+
+
+def _region(part: str) -> int:
+    if part in _REGION_OF_PART:
+        return _REGION_OF_PART[part]
+    side = part.split("_", 1)[1]
+    if side in ("hand", "fingers", "thumb"):
+        return SKIN
+    if side in ("collar", "upper_arm", "forearm"):
+        return TOP
+    if side in ("foot", "toes"):
+        return SHOES
+    return BOTTOM
 
 
 @dataclass(frozen=True)
@@ -251,10 +285,9 @@ def map_bones(body: Body, skeleton: Skeleton) -> Int[np.ndarray, " B"]:
     """Each rig bone's skeleton joint (``-1``: none), by part names and rest positions (module
     docstring, step 1)."""
     joints, height = _rest_unit(skeleton)
-    rel_j = (joints - joints[0]) / max(height, 1e-9)
     heads = np.asarray(body.heads, np.float64)
-    ys = np.concatenate([heads[:, 1], np.asarray(body.tails)[:, 1]])
-    rel_b = (heads - heads[0]) / max(float(ys.max() - ys.min()), 1e-9)
+    rel_j = joints - joints[0]
+    rel_b = (heads - heads[0]) * _leg_ratio(joints, heads)
     by_part: dict[str, list[int]] = {}
     for j, name in enumerate(skeleton.names):
         part = _part_of_joint(name)
@@ -265,15 +298,7 @@ def map_bones(body: Body, skeleton: Skeleton) -> Int[np.ndarray, " B"]:
         cand = by_part.get(part, [])
         bones = [body.bones.index(b) for b in bone_names if b in body.bones]
         cand = list(cand)
-        # A joint named exactly like a bone takes it; the rest pair along the chain.
-        for j in list(cand):
-            same = [
-                b for b in bones if _normal_name(body.bones[b]) == _normal_name(skeleton.names[j])
-            ]
-            if same:
-                out[same[0]] = j
-                cand.remove(j)
-                bones.remove(same[0])
+        # Pair along the chain, nearest in rest position.
         cost = np.linalg.norm(rel_j[cand][:, None, :] - rel_b[bones][None, :, :], axis=-1)
         for k, m in _monotone_pairs(cost):
             out[bones[m]] = cand[k]
@@ -288,6 +313,14 @@ def map_bones(body: Body, skeleton: Skeleton) -> Int[np.ndarray, " B"]:
             "(jcrowd.motion.body.PART_NAMES lists the conventions understood)"
         )
     return out
+
+
+def _leg_ratio(joints: np.ndarray, heads: np.ndarray) -> float:
+    """The skeleton's root-to-lowest-joint height over the rig's: the scale that brings the
+    rig to the skeleton (legs are where skeletons agree; a skeleton's top may be its neck)."""
+    sk = joints[0, 1] - joints[:, 1].min()
+    rig = heads[0, 1] - heads[:, 1].min()
+    return float(sk / rig) if rig > 1e-9 and sk > 1e-9 else 1.0
 
 
 def _monotone_pairs(cost: np.ndarray) -> list[tuple[int, int]]:
@@ -371,7 +404,7 @@ def _chain_child(body: Body, joint_of_bone: np.ndarray, b: int) -> int:
     if len(first) <= 1:
         return first[0] if first else -1
     parts = [_part_of_bone(body.bones[c]) for c in first]
-    for want in (_part_of_bone(body.bones[b]), "neck", "head"):
+    for want in (_part_of_bone(body.bones[b]), "head"):
         if want in parts:
             return first[parts.index(want)]
     return -1
@@ -394,11 +427,9 @@ def bind_body(body: Body, skeleton: Skeleton, forward: np.ndarray | None = None)
     def part_bone(part: str) -> int:
         return body.bones.index(_ALL_PARTS[part][0][0])
 
-    pelvis, foot, head = part_bone("pelvis"), part_bone("left_foot"), part_bone("head")
-    rig_span = (heads[pelvis, 1] - heads[foot, 1]) + (heads[head, 1] - heads[pelvis, 1])
+    pelvis, foot = part_bone("pelvis"), part_bone("left_foot")
     sk = rest
-    sk_span = (sk[jb[pelvis], 1] - sk[jb[foot], 1]) + (sk[jb[head], 1] - sk[jb[pelvis], 1])
-    s = float(sk_span / rig_span)
+    s = float((sk[jb[pelvis], 1] - sk[jb[foot], 1]) / (heads[pelvis, 1] - heads[foot, 1]))
 
     maps = _bone_maps(body, jb, heads, rest, s)
     meshes = []
@@ -417,6 +448,8 @@ def bind_body(body: Body, skeleton: Skeleton, forward: np.ndarray | None = None)
                 nout[sel] += w[sel, k, None] * (n[sel] @ np.linalg.inv(lin))
         nout /= np.maximum(np.linalg.norm(nout, axis=1, keepdims=True), 1e-12)
         joint_ids, joint_w = _merge(jb[own], w)
+        main = np.asarray(mesh.bones, np.int64)[:, 0]  # the strongest rig bone (sorted)
+        regions = np.array([_region(_part_of_bone(b)) for b in body.bones], np.int8)[main]
         meshes.append(
             BodyMesh(
                 out.astype(np.float32),
@@ -424,6 +457,7 @@ def bind_body(body: Body, skeleton: Skeleton, forward: np.ndarray | None = None)
                 np.asarray(mesh.triangles, np.int32),
                 joint_ids,
                 joint_w,
+                regions,
             )
         )
     return BoundBody(tuple(meshes), rest.astype(np.float32), jb, s)
@@ -569,6 +603,7 @@ class SkinnedLevel:
     local_ref: Float[np.ndarray, "K 4"]
     ref_points: Int[np.ndarray, "K M"]
     ref_offsets: Float[np.ndarray, "K M 3"]
+    region: Int[np.ndarray, " V"]
 
 
 def _quat_matrix(q: np.ndarray) -> np.ndarray:

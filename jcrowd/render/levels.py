@@ -58,9 +58,12 @@ class LevelInstances:
         joints: ``(C, J, 3)`` world positions (m, y up) of that level's ``J`` joints; NumPy or
             device arrays (copied to the host once).
         valid: ``(C,)`` bool, the slots to draw; padding slots are False and may hold anything.
-        colors: ``(C, 3)`` RGB in [0, 1] per slot (e.g. from ``LEVEL_COLORS``).
+        colors: ``(C, 3)`` RGB in [0, 1] per slot (e.g. from ``LEVEL_COLORS``); a level drawn
+            as bodies also takes ``(C, 3, 3)``: skin, top and bottom per slot.
+        heights: ``(C,)`` each slot's agent height (m); needed by a level drawn as bodies.
     """
 
     joints: Float[Any, "C J 3"]
     valid: Bool[Any, " C"]
     colors: Float[Any, "C 3"]
+    heights: Float[Any, " C"] | None = None

@@ -27,6 +27,16 @@ import numpy as np
 from jaxtyping import Float
 
 from jcrowd.errors import RenderError
+from jcrowd.motion.body import SkinnedLevel
+from jcrowd.render.bodies import (
+    BLOB_FRAGMENT,
+    BLOB_VERTEX,
+    BODY_VERTEX,
+    SHOE_COLOR,
+    SKY_FRAGMENT,
+    SKY_VERTEX,
+    BodyLevel,
+)
 from jcrowd.render.camera import View, projection_matrix, view_matrix
 from jcrowd.render.context import check_gl, gl_renderer, make_context
 from jcrowd.render.levels import LevelInstances, LevelMesh
@@ -49,6 +59,7 @@ _AMBIENT = 0.40
 _GROUND = (0.74, 0.74, 0.70)
 _GRID_LINE = (0.52, 0.52, 0.50)
 _FLOATS_PER_BONE = 9  # start xyz, end xyz, colour rgb
+_ZENITH = (0.42, 0.60, 0.86)  # the sky overhead (sky=True); the horizon is the background
 
 
 class _Level:
@@ -107,6 +118,11 @@ class CrowdRenderer:
             :func:`~jcrowd.render.meshes.capsule_detail` of the level (64 triangles per bone at
             level 0, fewer for farther levels). Coarser capsules render faster, most of all on
             a software rasteriser.
+        bodies: per level, a :class:`~jcrowd.motion.body.SkinnedLevel` to draw that level's
+            agents as skinned bodies (:mod:`jcrowd.render.bodies`; their
+            :class:`LevelInstances` then carry every point of the step and the heights), or
+            None to draw capsules; None: capsules everywhere. Bodies cast blob shadows.
+        sky: draw a sky gradient behind everything instead of the plain background.
     """
 
     def __init__(
@@ -124,8 +140,17 @@ class CrowdRenderer:
         ground: bool = True,
         obstacles: Float[np.ndarray, "V 6"] | None = None,
         detail: Sequence[tuple[int, int]] | None = None,
+        bodies: Sequence[SkinnedLevel | None] | None = None,
+        sky: bool = False,
     ) -> None:
         meshes = [LevelMesh(tuple(p)) for p in levels]
+        self._body_specs = list(bodies) if bodies is not None else [None] * len(meshes)
+        if len(self._body_specs) != len(meshes):
+            raise RenderError(
+                f"CrowdRenderer: expected {len(meshes)} bodies entries (one per level), found "
+                f"{len(self._body_specs)}"
+            )
+        self._sky = bool(sky)
         caps = [int(c) for c in capacity]
         _check_args(meshes, caps, width, height, samples, bone_radius, ground_size, background)
         details = [capsule_detail(i) for i in range(len(meshes))] if detail is None else detail
@@ -156,7 +181,7 @@ class CrowdRenderer:
         self.ctx = make_context() if ctx is None else ctx
         self._released = False
         self._objects: list[Any] = []
-        self._levels: list[_Level] = []
+        self._levels: list[_Level | BodyLevel] = []
         try:
             self._build(meshes, caps, details)
         except BaseException:
@@ -180,7 +205,33 @@ class CrowdRenderer:
         )
         self._objects.append(self._ground_prog)
         geometries: dict[tuple[int, int], tuple[moderngl.Buffer, moderngl.Buffer]] = {}
-        for mesh, cap, detail in zip(meshes, caps, details, strict=True):
+        self._body_prog = None
+        if any(b is not None for b in self._body_specs):
+            self._body_prog = ctx.program(
+                vertex_shader=BODY_VERTEX, fragment_shader=CAPSULE_FRAGMENT
+            )
+            self._objects.append(self._body_prog)
+            self._blob_prog = ctx.program(vertex_shader=BLOB_VERTEX, fragment_shader=BLOB_FRAGMENT)
+            self._objects.append(self._blob_prog)
+            quad = np.array([[-1, -1], [1, -1], [1, 1], [-1, -1], [1, 1], [-1, 1]], np.float32)
+            quad_vbo = ctx.buffer(quad.tobytes())
+            self._blob_instances = ctx.buffer(reserve=max(4, 12 * sum(caps)))
+            self._objects += [quad_vbo, self._blob_instances]
+            self._blob_vao = ctx.vertex_array(
+                self._blob_prog,
+                [(quad_vbo, "2f", "in_corner"), (self._blob_instances, "3f/i", "a_center")],
+            )
+            self._objects.append(self._blob_vao)
+        if self._sky:
+            self._sky_prog = ctx.program(vertex_shader=SKY_VERTEX, fragment_shader=SKY_FRAGMENT)
+            tri = np.array([[-1, -1], [3, -1], [-1, 3]], np.float32)
+            sky_vbo = ctx.buffer(tri.tobytes())
+            self._sky_vao = ctx.vertex_array(self._sky_prog, [(sky_vbo, "2f", "in_corner")])
+            self._objects += [self._sky_prog, sky_vbo, self._sky_vao]
+        for mesh, cap, detail, body in zip(meshes, caps, details, self._body_specs, strict=True):
+            if body is not None and self._body_prog is not None:
+                self._levels.append(BodyLevel(ctx, self._body_prog, body, cap))
+                continue
             if detail not in geometries:
                 vertices, triangles = capsule_mesh(*detail)
                 vbo, ibo = ctx.buffer(vertices.tobytes()), ctx.buffer(triangles.tobytes())
@@ -246,18 +297,28 @@ class CrowdRenderer:
                 f"CrowdRenderer.render: expected {len(self._levels)} levels, found {len(levels)}"
             )
         counts = [
-            _stage(level, data, i)
+            _stage_body(level, data, i) if isinstance(level, BodyLevel) else _stage(level, data, i)
             for i, (level, data) in enumerate(zip(self._levels, levels, strict=True))
         ]
         view_proj = projection_matrix(view, self.width, self.height) @ view_matrix(view)
         vp_bytes = view_proj.T.astype(np.float32).tobytes()  # GL wants column-major
         ctx = self.ctx
         self._target.use()
+        self._target.clear(color=(*self.background, 1.0), depth=1.0)
+        if self._sky:
+            ctx.enable_only(moderngl.NOTHING)
+            inv = np.linalg.inv(view_proj).T.astype(np.float32).tobytes()
+            _uniform(self._sky_prog, "u_inv_view_proj").write(inv)
+            self._sky_vao.render(moderngl.TRIANGLES)
         ctx.enable_only(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         ctx.front_face, ctx.cull_face = "ccw", "back"
-        self._target.clear(color=(*self.background, 1.0), depth=1.0)
         _uniform(self._capsule, "u_view_proj").write(vp_bytes)
+        if self._body_prog is not None:
+            _uniform(self._body_prog, "u_view_proj").write(vp_bytes)
         for level, n in zip(self._levels, counts, strict=True):
+            if isinstance(level, BodyLevel):
+                level.draw()
+                continue
             if n * level.num_bones == 0:
                 continue
             level.instances.write(level.staging[:n])
@@ -268,6 +329,16 @@ class CrowdRenderer:
         if self._draw_ground:
             _uniform(self._ground_prog, "u_view_proj").write(vp_bytes)
             self._ground_vao.render(moderngl.TRIANGLES)
+        roots = [lv.roots for lv in self._levels if isinstance(lv, BodyLevel) and lv.count]
+        if roots and self._draw_ground:
+            blobs = np.concatenate(roots)
+            self._blob_instances.write(np.ascontiguousarray(blobs, np.float32).tobytes())
+            ctx.enable_only(moderngl.DEPTH_TEST | moderngl.BLEND)
+            ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+            self._target.depth_mask = False
+            _uniform(self._blob_prog, "u_view_proj").write(vp_bytes)
+            self._blob_vao.render(moderngl.TRIANGLES, instances=len(blobs))
+            self._target.depth_mask = True
         if self.samples:
             ctx.copy_framebuffer(self._resolved, self._target)
         raw = self._resolved.read(components=3, alignment=1)
@@ -308,10 +379,21 @@ class CrowdRenderer:
         if self._owns_ctx:
             self.ctx.release()
 
+    def _capsule_fragment_uniforms(self, prog: moderngl.Program) -> None:
+        _uniform(prog, "u_light_dir").value = tuple(float(x) for x in _LIGHT_DIR)
+        _uniform(prog, "u_ambient").value = _AMBIENT
+
     def _set_constant_uniforms(self) -> None:
         _uniform(self._capsule, "u_radius").value = self.bone_radius
         _uniform(self._capsule, "u_light_dir").value = tuple(float(x) for x in _LIGHT_DIR)
         _uniform(self._capsule, "u_ambient").value = _AMBIENT
+        if self._body_prog is not None:
+            _uniform(self._body_prog, "u_shoes").value = SHOE_COLOR
+            _uniform(self._body_prog, "u_bones").value = 0
+            self._capsule_fragment_uniforms(self._body_prog)
+        if self._sky:
+            _uniform(self._sky_prog, "u_horizon").value = self.background
+            _uniform(self._sky_prog, "u_zenith").value = _ZENITH
         if self._obstacle_vao is not None:
             o = self._obstacle_prog
             _uniform(o, "u_light_dir").value = tuple(float(x) for x in _LIGHT_DIR)
@@ -369,6 +451,31 @@ def _stage(level: _Level, data: LevelInstances, index: int) -> int:
     out[:, :, 3:6] = picked[:, level.joint_idx]
     out[:, :, 6:9] = picked_colors[:, None, :]
     return n
+
+
+def _stage_body(level: BodyLevel, data: LevelInstances, index: int) -> int:
+    """Check one body level's input and stage its valid agents' joint frames and colours."""
+    where = f"CrowdRenderer.render: level {index}"
+    points = np.asarray(data.joints)
+    valid = np.asarray(data.valid)
+    c = points.shape[0] if points.ndim else 0
+    if points.ndim != 3 or points.shape[2] != 3 or points.shape[1] < level.num_points:
+        raise RenderError(
+            f"{where}: expected the step's points of shape (C, ≥{level.num_points}, 3), found "
+            f"{points.shape}"
+        )
+    if c > level.capacity:
+        raise RenderError(f"{where}: {c} slots passed, capacity is {level.capacity}")
+    if valid.shape != (c,) or valid.dtype != np.bool_:
+        raise RenderError(
+            f"{where}: expected valid of shape ({c},) bool, found {valid.shape} {valid.dtype}"
+        )
+    colors = np.asarray(data.colors)
+    if colors.shape not in ((c, 3), (c, 3, 3)):
+        raise RenderError(
+            f"{where}: expected colors of shape ({c}, 3) or ({c}, 3, 3), found {colors.shape}"
+        )
+    return level.stage(points, valid, colors, data.heights, where)
 
 
 def _check_args(
