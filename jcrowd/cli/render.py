@@ -152,7 +152,7 @@ def _for_capsules(colors: np.ndarray) -> np.ndarray:
 
 
 def body_levels(model: Any, decoders: Any = None) -> tuple[Any, ...]:
-    """The shipped body bound to ``model``'s skeleton, one skinned mesh per level."""
+    """The shipped body bound to ``model``'s skeleton, skinned to each level's joints."""
     from jcrowd.crowd.bodies import skinned_levels
     from jcrowd.io.body_file import load_body
     from jcrowd.io.resources import body_path

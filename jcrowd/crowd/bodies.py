@@ -1,38 +1,33 @@
 """Skinned bodies per level of detail (issue 20; paper 003 §5.1): a bound body's meshes skinned
 to each level's kept joints, for a renderer that has the step's points.
 
-Level ``l`` draws mesh ``min(l, R − 1)`` of the ``R`` resolutions (finest at level 0) unless the
-caller says otherwise; its weights move from the joints the level drops to their kept ancestor
-through the dropped joints' reference rotations (:func:`jcrowd.motion.body.level_skin`), so the
-skin follows the points the step places rigidly off a kept joint. Host code, once per model.
+Every level gets every resolution of the body (the renderer picks one per agent by its size on
+screen, :mod:`jcrowd.render.bodies`); each resolution's weights move from the joints the level
+drops to their kept ancestor through the dropped joints' reference rotations
+(:func:`jcrowd.motion.body.level_skin`), so the skin follows the points the step places rigidly
+off a kept joint. Host code, once per model.
 """
 
 from __future__ import annotations
-
-from collections.abc import Sequence
 
 import numpy as np
 
 from jcrowd.crowd.synthesis import Decoders, _chain, build_decoders
 from jcrowd.model.motion_model import MotionModel
-from jcrowd.motion.body import BoundBody, SkinnedLevel, level_skin
+from jcrowd.motion.body import BoundBody, SkinnedLevel, SkinnedMesh, level_skin
 from jcrowd.motion.rotation import quat_mul
 
 __all__ = ["skinned_levels"]
 
 
 def skinned_levels(
-    model: MotionModel,
-    bound: BoundBody,
-    meshes: Sequence[int] | None = None,
-    decoders: Decoders | None = None,
+    model: MotionModel, bound: BoundBody, decoders: Decoders | None = None
 ) -> tuple[SkinnedLevel, ...]:
-    """One :class:`~jcrowd.motion.body.SkinnedLevel` per level of ``model``; ``meshes[l]`` the
-    resolution level ``l`` draws (default: ``min(l, R − 1)``)."""
+    """One :class:`~jcrowd.motion.body.SkinnedLevel` per level of ``model``, each with every
+    mesh of ``bound``."""
     dec = build_decoders(model) if decoders is None else decoders
     skel = model.skeleton
     reference = np.asarray(model.layout.reference, np.float64)
-    res = len(bound.meshes)
     out = []
     for lv, level in enumerate(dec.levels):
         kept = [0, *sorted(j for j in model.levels[lv].joints if j != 0)]
@@ -45,8 +40,13 @@ def skinned_levels(
                 _, rot, off = _chain(skel, reference, kept_set, j)
                 f_rot[j] = quat_mul(rot, reference[j])
                 f_pos[j] = off
-        mesh = bound.meshes[min(lv, res - 1) if meshes is None else meshes[lv]]
-        bones, weights, offsets = level_skin(mesh, bound.rest, anchor, f_rot, f_pos)
+        meshes = []
+        for mesh in bound.meshes:
+            bones, weights, offsets = level_skin(mesh, bound.rest, anchor, f_rot, f_pos)
+            region = np.ones(len(mesh.vertices), np.int8) if mesh.region is None else mesh.region
+            meshes.append(
+                SkinnedMesh(mesh.triangles, mesh.normals, region, bones, weights, offsets)
+            )
         # The points each kept joint's frame carries: kept children, then anchored points.
         parents = tuple(int(p) for p in level.skeleton.parents)
         offs_level = np.asarray(level.skeleton.offsets, np.float64)
@@ -67,19 +67,12 @@ def skinned_levels(
                 ref_offsets[k, m] = off
         out.append(
             SkinnedLevel(
-                triangles=mesh.triangles,
-                normals=mesh.normals,
-                bones=bones,
-                weights=weights,
-                offsets=offsets,
+                meshes=tuple(meshes),
                 kept=np.asarray(kept, np.int32),
                 parents=parents,
                 local_ref=np.asarray(level.local_ref, np.float64),
                 ref_points=ref_points,
                 ref_offsets=ref_offsets,
-                region=(
-                    np.full(len(mesh.vertices), 1, np.int8) if mesh.region is None else mesh.region
-                ),
             )
         )
     return tuple(out)

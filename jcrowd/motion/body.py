@@ -20,12 +20,13 @@ a motion model's skeleton (:func:`bind_body`) takes three steps.
    The pelvis, thighs, shins, feet, upper arms, forearms and head must be found; if one is not,
    :class:`~jcrowd.errors.SkinError` names those parts and the skeleton's joints.
 2. **Weights.** A rig bone with no joint gives its weights to its nearest ancestor that has one
-   (``cmu16``: ``Head`` → its ``head``, ``Spine1`` → its ``thorax``); each vertex keeps its 4 largest weights, renormalised.
+   (``cmu16``: ``Head`` → its ``head``, ``Spine1`` → its ``thorax``); each vertex keeps its 4
+   largest weights, renormalised.
 3. **Rest pose** (the fit). The mesh is turned to face the skeleton's rest forward and scaled
-   by ``s``, the skeleton's root-to-ankle height over the rig's. Each bound
-   bone ``b`` (joint ``j``) then gets an affine map ``A_b``: its rig joint goes to the skeleton's
-   rest joint, the rig's direction to its chain child (the next bound bone along the limb) turns
-   onto the skeleton's, and lengths along that direction scale by the ratio of the two bone
+   by ``s``, the skeleton's root-to-ankle height over the rig's. Each bound bone ``b`` (joint
+   ``j``) then gets an affine map ``A_b``: its rig joint goes to the skeleton's rest joint, the
+   rig's direction to its chain child (the next bound bone along the limb) turns onto the
+   skeleton's, and lengths along that direction scale by the ratio of the two bone
    lengths (clamped to ``[0.6, 1.6]``; other directions by ``s``), so two bones meeting at a
    joint agree there and the skin does not tear. A bone with no chain child (feet without toes,
    the head, hands) keeps its parent's turn. The rest vertices are ``Σ_b w_b A_b v``: the mesh
@@ -59,16 +60,17 @@ from jcrowd.motion.rotation import _xp, quat_rotate
 from jcrowd.motion.skeleton import Skeleton, rest_positions
 
 __all__ = [
+    "BOTTOM",
     "PART_NAMES",
     "REQUIRED_PARTS",
-    "Body",
-    "BodyMesh",
-    "BoundBody",
-    "BOTTOM",
     "SHOES",
     "SKIN",
     "TOP",
+    "Body",
+    "BodyMesh",
+    "BoundBody",
     "SkinnedLevel",
+    "SkinnedMesh",
     "bind_body",
     "frames_from_points",
     "level_skin",
@@ -284,7 +286,7 @@ def _rest_unit(skeleton: Skeleton) -> tuple[np.ndarray, float]:
 def map_bones(body: Body, skeleton: Skeleton) -> Int[np.ndarray, " B"]:
     """Each rig bone's skeleton joint (``-1``: none), by part names and rest positions (module
     docstring, step 1)."""
-    joints, height = _rest_unit(skeleton)
+    joints, _ = _rest_unit(skeleton)
     heads = np.asarray(body.heads, np.float64)
     rel_j = joints - joints[0]
     rel_b = (heads - heads[0]) * _leg_ratio(joints, heads)
@@ -576,14 +578,32 @@ def skin(
 
 
 @dataclass(frozen=True)
+class SkinnedMesh:
+    """One resolution of a body skinned to a level's kept joints (:func:`level_skin`).
+
+    Attributes:
+        triangles: ``(T, 3)`` int32; normals ``(V, 3)`` at rest; region ``(V,)`` clothing
+            region (:data:`SKIN` … :data:`SHOES`).
+        bones, weights, offsets: ``(V, 4)`` kept-joint ids, ``(V, 4)`` weights, ``(V, 4, 3)``
+            offsets in those joints' frames for a 1 m skeleton.
+    """
+
+    triangles: Int[np.ndarray, "T 3"]
+    normals: Float[np.ndarray, "V 3"]
+    region: Int[np.ndarray, " V"]
+    bones: Int[np.ndarray, "V 4"]
+    weights: Float[np.ndarray, "V 4"]
+    offsets: Float[np.ndarray, "V 4 3"]
+
+
+@dataclass(frozen=True)
 class SkinnedLevel:
-    """What a renderer needs to draw one level of detail as skinned bodies: the mesh, skinned
-    to the level's kept joints (:func:`level_skin`), and how to find those joints' frames in
+    """What a renderer needs to draw one level of detail as skinned bodies: the body's meshes,
+    fine to coarse, skinned to the level's kept joints, and how to find those joints' frames in
     the points the step outputs (:func:`frames_from_points`).
 
     Attributes:
-        triangles: ``(T, 3)`` int32; normals ``(V, 3)`` at rest.
-        bones, weights, offsets: :func:`level_skin`'s ``(V, 4)``, ``(V, 4)``, ``(V, 4, 3)``.
+        meshes: one :class:`SkinnedMesh` per resolution, finest first.
         kept: ``(K,)`` the output point each kept joint is; parents ``(K,)`` kept parents (-1
             for the root), parents first.
         local_ref: ``(K, 4)`` each kept joint's rotation in its kept parent's frame when its
@@ -593,17 +613,12 @@ class SkinnedLevel:
             ref_offsets ``(K, M, 3)`` those points in the joint's frame for a 1 m skeleton.
     """
 
-    triangles: Int[np.ndarray, "T 3"]
-    normals: Float[np.ndarray, "V 3"]
-    bones: Int[np.ndarray, "V 4"]
-    weights: Float[np.ndarray, "V 4"]
-    offsets: Float[np.ndarray, "V 4 3"]
+    meshes: tuple[SkinnedMesh, ...]
     kept: Int[np.ndarray, " K"]
     parents: tuple[int, ...]
     local_ref: Float[np.ndarray, "K 4"]
     ref_points: Int[np.ndarray, "K M"]
     ref_offsets: Float[np.ndarray, "K M 3"]
-    region: Int[np.ndarray, " V"]
 
 
 def _quat_matrix(q: np.ndarray) -> np.ndarray:

@@ -1,14 +1,21 @@
 """Skinned bodies, blob shadows and the sky for :class:`~jcrowd.render.CrowdRenderer` (issue 20).
 
-A level drawn as bodies (:class:`~jcrowd.motion.body.SkinnedLevel`) owns one mesh and one
-instanced draw. Per frame the host finds each valid agent's kept-joint frames in the points the
-step placed (:func:`~jcrowd.motion.body.frames_from_points`) and writes them, as the rows of
-``[h R | p]`` (three RGBA32F texels per joint, one texture row per agent), into a float
-texture allocated once for the level's capacity; the vertex shader blends its four joints,
+A level drawn as bodies (:class:`~jcrowd.motion.body.SkinnedLevel`) has every resolution of the
+body. Per frame the host finds each valid agent's kept-joint frames in the points the step
+placed (:func:`~jcrowd.motion.body.frames_from_points`) and its height on screen, sorts the
+agents by the mesh that height asks for (:data:`MESH_PIXELS`), and writes one texture row per
+agent (allocated once for the level's capacity): three RGBA32F texels per kept joint, the rows
+of ``[h R | p]``, then three for its skin, top and bottom colours. One instanced draw per mesh
+in use reads rows ``u_row0 + gl_InstanceID``; the vertex shader blends its four joints,
 ``Σ_k w_k (h R_k l_k + p_k)`` (linear-blend skinning, :func:`jcrowd.motion.body.skin`), and its
-normal by ``Σ_k w_k R_k``. Each vertex has a clothing region (skin, top, bottom, shoes) coloured
-per agent: ``colors`` of a level are ``(C, 3)`` (the top; the bottom is it darkened, the skin a
-fixed tone) or ``(C, 3, 3)`` (skin, top, bottom).
+normal by ``Σ_k w_k R_k``. Each vertex has a clothing region (skin, top, bottom, shoes);
+``colors`` of a level are ``(C, 3)`` (the top; the bottom is it darkened, the skin a fixed tone)
+or ``(C, 3, 3)`` (skin, top, bottom).
+
+Why per agent: on a software rasteriser (llvmpipe, this project's CI and demo) a frame costs
+about what its triangles do, and a level is a band of distances, not of sizes on screen: the
+plaza demo at 960×540 took 326 ms per frame with level ``l`` drawing mesh ``l`` and 211 ms
+with mesh ``l + 1`` (2026-12-03), while a close-up needs the fine mesh at level 0.
 
 Blob shadows: a soft dark disc on the ground under each body (radius 0.28 × height), drawn
 after the ground with blending. The sky: a gradient from the background colour at the horizon
@@ -29,12 +36,14 @@ __all__ = [
     "BLOB_FRAGMENT",
     "BLOB_VERTEX",
     "BODY_VERTEX",
+    "MESH_PIXELS",
     "SHOE_COLOR",
     "SKIN_TONE",
     "SKY_FRAGMENT",
     "SKY_VERTEX",
     "BodyLevel",
     "body_colors",
+    "pick_meshes",
     "tint_palette",
 ]
 
@@ -46,10 +55,20 @@ BOTTOM_SHADE = 0.55
 SHADOW_RADIUS = 0.28
 """Blob shadow radius as a fraction of the agent's height."""
 
+MESH_PIXELS = (600.0, 250.0, 120.0, 60.0)
+"""An agent at least ``MESH_PIXELS[m]`` pixels tall on screen is drawn with mesh ``m`` (finest
+first), a smaller one with the next; below the last, the coarsest. With the shipped body that
+is 5–12 triangles per pixel of height below 600 px. Measured on the plaza demo (960×540, 20
+frames, llvmpipe, 2026-12-03): thresholds (400, 100, 45, 22) drew 1.01 M triangles in 193 ms
+per frame, (400, 150, 70, 35) 0.76 M in 158 ms, these 0.64 M in 142 ms, with no difference we
+could see at 2× zoom."""
+
 BODY_VERTEX = """
 #version 330 core
 uniform mat4 u_view_proj;
-uniform sampler2D u_bones;   // row i: agent i; texels 3k..3k+2: rows of [h R_k | p_k]
+uniform sampler2D u_bones;   // row: an agent; texels 3k..3k+2: rows of [h R_k | p_k]
+uniform int u_row0;          // the first agent row of this draw
+uniform int u_colors_at;     // texel of the agent's skin colour (then top, bottom)
 uniform vec3 u_shoes;
 in vec3 in_off0;
 in vec3 in_off1;
@@ -59,20 +78,18 @@ in vec3 in_normal;
 in vec4 in_bones;
 in vec4 in_weights;
 in float in_region;          // 0 skin, 1 top, 2 bottom, 3 shoes
-in vec3 a_skin;              // per instance
-in vec3 a_top;
-in vec3 a_bottom;
 out vec3 v_normal;
 out vec3 v_color;
 void main() {
     vec3 offs[4] = vec3[4](in_off0, in_off1, in_off2, in_off3);
+    int row = u_row0 + gl_InstanceID;
     vec3 p = vec3(0.0);
     vec3 n = vec3(0.0);
     for (int k = 0; k < 4; ++k) {
         int j = int(in_bones[k] + 0.5);
-        vec4 r0 = texelFetch(u_bones, ivec2(3 * j, gl_InstanceID), 0);
-        vec4 r1 = texelFetch(u_bones, ivec2(3 * j + 1, gl_InstanceID), 0);
-        vec4 r2 = texelFetch(u_bones, ivec2(3 * j + 2, gl_InstanceID), 0);
+        vec4 r0 = texelFetch(u_bones, ivec2(3 * j, row), 0);
+        vec4 r1 = texelFetch(u_bones, ivec2(3 * j + 1, row), 0);
+        vec4 r2 = texelFetch(u_bones, ivec2(3 * j + 2, row), 0);
         vec3 o = offs[k];
         vec3 moved = vec3(dot(r0.xyz, o) + r0.w, dot(r1.xyz, o) + r1.w, dot(r2.xyz, o) + r2.w);
         p += in_weights[k] * moved;
@@ -80,7 +97,7 @@ void main() {
                                   dot(r2.xyz, in_normal));
     }
     int region = int(in_region + 0.5);
-    v_color = region == 0 ? a_skin : region == 1 ? a_top : region == 2 ? a_bottom : u_shoes;
+    v_color = region < 3 ? texelFetch(u_bones, ivec2(u_colors_at + region, row), 0).rgb : u_shoes;
     v_normal = n;
     gl_Position = u_view_proj * vec4(p, 1.0);
 }
@@ -160,56 +177,71 @@ class BodyLevel:
         self, ctx: moderngl.Context, prog: moderngl.Program, level: SkinnedLevel, capacity: int
     ) -> None:
         self.level = level
+        self.prog = prog
         self.capacity = capacity
         self.num_kept = len(level.kept)
         self.num_points = int(max(level.kept.max(), level.ref_points.max())) + 1
-        v = len(level.normals)
-        data = np.concatenate(
-            [
-                np.asarray(level.offsets, np.float32).reshape(v, 12),
-                np.asarray(level.normals, np.float32),
-                np.asarray(level.bones, np.float32),
-                np.asarray(level.weights, np.float32),
-                np.asarray(level.region, np.float32)[:, None],
-            ],
-            axis=1,
-        )
-        self.vbo = ctx.buffer(np.ascontiguousarray(data).tobytes())
-        self.ibo = ctx.buffer(np.ascontiguousarray(level.triangles, np.int32).tobytes())
-        self.texture = ctx.texture((3 * self.num_kept, max(capacity, 1)), 4, dtype="f4")
+        self.width = 3 * self.num_kept + 3
+        self.texture = ctx.texture((self.width, max(capacity, 1)), 4, dtype="f4")
         self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.staging = np.zeros((max(capacity, 1), 3 * self.num_kept, 4), np.float32)
-        self.colors = ctx.buffer(reserve=max(capacity, 1) * 9 * 4)
-        self.vao = ctx.vertex_array(
-            prog,
-            [
-                (
-                    self.vbo,
-                    "3f 3f 3f 3f 3f 4f 4f 1f",
-                    "in_off0",
-                    "in_off1",
-                    "in_off2",
-                    "in_off3",
-                    "in_normal",
-                    "in_bones",
-                    "in_weights",
-                    "in_region",
-                ),
-                (self.colors, "3f 3f 3f/i", "a_skin", "a_top", "a_bottom"),
-            ],
-            index_buffer=self.ibo,
-            index_element_size=4,
-        )
+        self.staging = np.zeros((max(capacity, 1), self.width, 4), np.float32)
+        self._objects: list[Any] = [self.texture]
+        self.vaos = []
+        for mesh in level.meshes:
+            v = len(mesh.normals)
+            data = np.concatenate(
+                [
+                    np.asarray(mesh.offsets, np.float32).reshape(v, 12),
+                    np.asarray(mesh.normals, np.float32),
+                    np.asarray(mesh.bones, np.float32),
+                    np.asarray(mesh.weights, np.float32),
+                    np.asarray(mesh.region, np.float32)[:, None],
+                ],
+                axis=1,
+            )
+            vbo = ctx.buffer(np.ascontiguousarray(data).tobytes())
+            ibo = ctx.buffer(np.ascontiguousarray(mesh.triangles, np.int32).tobytes())
+            vao = ctx.vertex_array(
+                prog,
+                [
+                    (
+                        vbo,
+                        "3f 3f 3f 3f 3f 4f 4f 1f",
+                        "in_off0",
+                        "in_off1",
+                        "in_off2",
+                        "in_off3",
+                        "in_normal",
+                        "in_bones",
+                        "in_weights",
+                        "in_region",
+                    ),
+                ],
+                index_buffer=ibo,
+                index_element_size=4,
+            )
+            self._objects += [vbo, ibo, vao]
+            self.vaos.append(vao)
+        self.runs: list[tuple[int, int, int]] = []  # (mesh, first row, agents)
         self.count = 0
         self.roots = np.zeros((0, 3), np.float32)
 
     def stage(
-        self, points: np.ndarray, valid: np.ndarray, colors: Any, heights: Any, where: str
+        self,
+        points: np.ndarray,
+        valid: np.ndarray,
+        colors: Any,
+        heights: Any,
+        view_proj: np.ndarray,
+        image_height: int,
+        where: str,
     ) -> int:
-        """Find the valid agents' frames and write them and their colours; returns how many."""
+        """Find the valid agents' frames and sizes on screen and write their rows; returns how
+        many."""
         rows = np.flatnonzero(valid)
         n = len(rows)
         self.count = n
+        self.runs = []
         if n == 0:
             self.roots = np.zeros((0, 3), np.float32)
             return 0
@@ -219,28 +251,61 @@ class BodyLevel:
         pts = np.asarray(points)[rows]
         if not (np.all(np.isfinite(pts)) and np.all(np.isfinite(h)) and np.all(h > 0)):
             raise RenderError(f"{where}: non-finite points or non-positive heights in a valid slot")
-        rot, pos = frames_from_points(self.level, pts, h)
-        mats = np.concatenate([rot * h[:, None, None, None], pos[..., None]], axis=-1)  # (n,K,3,4)
-        self.staging[:n] = mats.reshape(n, 3 * self.num_kept, 4)
-        self.texture.write(self.staging[:n].tobytes(), viewport=(0, 0, 3 * self.num_kept, n))
         cols = body_colors(np.asarray(colors)[rows])
         if not np.all(np.isfinite(cols)):
             raise RenderError(f"{where}: non-finite colours in a valid slot")
-        self.colors.write(np.ascontiguousarray(cols, np.float32).tobytes())
         root = pts[:, 0]
+        mesh = pick_meshes(root, h, view_proj, image_height, len(self.vaos))
+        order = np.argsort(mesh, kind="stable")
+        rot, pos = frames_from_points(self.level, pts[order], h[order])
+        hk = h[order][:, None, None, None]
+        mats = np.concatenate([rot * hk, pos[..., None]], axis=-1)  # (n, K, 3, 4)
+        k3 = 3 * self.num_kept
+        self.staging[:n, :k3] = mats.reshape(n, k3, 4)
+        self.staging[:n, k3:, :3] = cols[order]
+        self.texture.write(self.staging[:n].tobytes(), viewport=(0, 0, self.width, n))
+        counts = np.bincount(mesh, minlength=len(self.vaos))
+        first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        self.runs = [(m, int(first[m]), int(counts[m])) for m in range(len(self.vaos)) if counts[m]]
         self.roots = np.stack([root[:, 0], root[:, 2], SHADOW_RADIUS * h], axis=1).astype(
             np.float32
         )
         return n
 
     def draw(self) -> None:
-        if self.count:
-            self.texture.use(location=0)
-            self.vao.render(moderngl.TRIANGLES, instances=self.count)
+        if not self.count:
+            return
+        self.texture.use(location=0)
+        colors_at, row0 = self.prog["u_colors_at"], self.prog["u_row0"]
+        if not (isinstance(colors_at, moderngl.Uniform) and isinstance(row0, moderngl.Uniform)):
+            raise RenderError("the body shader lost its u_colors_at / u_row0 uniforms")
+        colors_at.value = 3 * self.num_kept
+        for m, first, count in self.runs:
+            row0.value = first
+            self.vaos[m].render(moderngl.TRIANGLES, instances=count)
 
     def release(self) -> None:
-        for obj in (self.vao, self.colors, self.texture, self.ibo, self.vbo):
+        for obj in reversed(self._objects):
             obj.release()
+
+
+def pick_meshes(
+    root: np.ndarray, height: np.ndarray, view_proj: np.ndarray, image_height: int, meshes: int
+) -> np.ndarray:
+    """Each agent's mesh index (0 finest) from its height on screen (:data:`MESH_PIXELS`): the
+    projected distance, in pixels, between its root on the ground and a point ``height`` above
+    (an agent behind the camera takes the coarsest)."""
+    n = len(root)
+    feet = np.stack([root[:, 0], np.zeros(n), root[:, 2], np.ones(n)], axis=1)
+    head = feet.copy()
+    head[:, 1] = height
+    a, b = feet @ view_proj.T, head @ view_proj.T
+    ok = (a[:, 3] > 1e-6) & (b[:, 3] > 1e-6)
+    ya = a[:, 1] / np.where(ok, a[:, 3], 1.0)
+    yb = b[:, 1] / np.where(ok, b[:, 3], 1.0)
+    px = np.where(ok, 0.5 * image_height * np.abs(yb - ya), 0.0)
+    pick = np.searchsorted(-np.asarray(MESH_PIXELS), -px, side="right")
+    return np.minimum(pick, meshes - 1).astype(np.int64)
 
 
 _SKIN_TONES = np.array(

@@ -296,11 +296,13 @@ class CrowdRenderer:
             raise RenderError(
                 f"CrowdRenderer.render: expected {len(self._levels)} levels, found {len(levels)}"
             )
+        view_proj = projection_matrix(view, self.width, self.height) @ view_matrix(view)
         counts = [
-            _stage_body(level, data, i) if isinstance(level, BodyLevel) else _stage(level, data, i)
+            _stage_body(level, data, i, view_proj, self.height)
+            if isinstance(level, BodyLevel)
+            else _stage(level, data, i)
             for i, (level, data) in enumerate(zip(self._levels, levels, strict=True))
         ]
-        view_proj = projection_matrix(view, self.width, self.height) @ view_matrix(view)
         vp_bytes = view_proj.T.astype(np.float32).tobytes()  # GL wants column-major
         ctx = self.ctx
         self._target.use()
@@ -453,7 +455,9 @@ def _stage(level: _Level, data: LevelInstances, index: int) -> int:
     return n
 
 
-def _stage_body(level: BodyLevel, data: LevelInstances, index: int) -> int:
+def _stage_body(
+    level: BodyLevel, data: LevelInstances, index: int, view_proj: np.ndarray, height: int
+) -> int:
     """Check one body level's input and stage its valid agents' joint frames and colours."""
     where = f"CrowdRenderer.render: level {index}"
     points = np.asarray(data.joints)
@@ -475,7 +479,7 @@ def _stage_body(level: BodyLevel, data: LevelInstances, index: int) -> int:
         raise RenderError(
             f"{where}: expected colors of shape ({c}, 3) or ({c}, 3, 3), found {colors.shape}"
         )
-    return level.stage(points, valid, colors, data.heights, where)
+    return level.stage(points, valid, colors, data.heights, view_proj, height, where)
 
 
 def _check_args(
