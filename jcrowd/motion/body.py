@@ -15,8 +15,8 @@ a motion model's skeleton (:func:`bind_body`) takes three steps.
    name says which part of the body a joint moves, and the rest pose says where in that part it
    sits. The 19-joint ``cmu16`` skeleton's ``thorax`` sits 11 cm above its pelvis, where the
    rig's ``LowerBack`` starts (not at ``Spine1``, which its name is in the CMU conversion: a
-   trunk bent at the chest would fold the belly), and its ``head`` at the base of the neck
-   (its End Site 5 cm above), where the rig's ``Neck`` starts: the neck and head are one part.
+   trunk bent at the chest would fold the belly), and its ``head`` in the neck (its End Site
+   5 cm above), where the rig's upper neck bone starts: the neck and head are one part.
    The pelvis, thighs, shins, feet, upper arms, forearms and head must be found; if one is not,
    :class:`~jcrowd.errors.SkinError` names those parts and the skeleton's joints.
 2. **Weights.** A rig bone with no joint gives its weights to its nearest ancestor that has one
@@ -76,6 +76,7 @@ __all__ = [
     "level_skin",
     "map_bones",
     "rest_offsets",
+    "skeleton_level",
     "skin",
 ]
 
@@ -694,3 +695,46 @@ def frames_from_points(
             target = np.where(tn > 1e-9, target / np.maximum(tn, 1e-9), posed)
             rot[:, j] = _swing(posed, target) @ ref
     return rot, pos
+
+
+def skeleton_level(bound: BoundBody, skeleton: Skeleton) -> SkinnedLevel:
+    """A :class:`SkinnedLevel` keeping every joint of ``skeleton`` (the one ``bound`` was bound
+    to), for points laid out as its joints then its End Sites (a BVH clip's FK, say; End Sites
+    may be left out of the points if the renderer is given only joints): a lone bone's twist
+    is taken from the rest pose."""
+    j = skeleton.num_joints
+    offsets = np.asarray(skeleton.offsets, np.float64)
+    ends = np.asarray(skeleton.end_offsets_or_empty(), np.float64)
+    _, height = _rest_unit(skeleton)
+    carried: list[list[tuple[int, np.ndarray]]] = [[] for _ in range(j)]
+    for c, p in enumerate(skeleton.parents):
+        if p >= 0:
+            carried[p].append((c, offsets[c] / height))
+    for e, p in enumerate(skeleton.end_parents):
+        carried[p].append((j + e, ends[e] / height))
+    width = max(1, max(len(c) for c in carried))
+    ref_points = np.full((j, width), -1, np.int32)
+    ref_offsets = np.zeros((j, width, 3), np.float32)
+    for k, items in enumerate(carried):
+        for m, (point, off) in enumerate(items):
+            ref_points[k, m] = point
+            ref_offsets[k, m] = off
+    meshes = tuple(
+        SkinnedMesh(
+            m.triangles,
+            m.normals,
+            np.ones(len(m.vertices), np.int8) if m.region is None else m.region,
+            m.bones,
+            m.weights,
+            rest_offsets(m, bound.rest),
+        )
+        for m in bound.meshes
+    )
+    return SkinnedLevel(
+        meshes=meshes,
+        kept=np.arange(j, dtype=np.int32),
+        parents=tuple(int(p) for p in skeleton.parents),
+        local_ref=np.tile([1.0, 0.0, 0.0, 0.0], (j, 1)),
+        ref_points=ref_points,
+        ref_offsets=ref_offsets,
+    )

@@ -346,14 +346,24 @@ _TROUSERS = np.array(
 )
 
 
+def _mix(x: np.ndarray) -> np.ndarray:
+    """A 64-bit integer mixing function (SplitMix64's finaliser) on uint64 arrays."""
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
 def tint_palette(n: int, seed: int = 0) -> np.ndarray:
-    """``(n, 3, 3)`` skin, top and trousers for agents ``0..n−1`` (``--color-by tint``): drawn
-    from fixed palettes by a generator seeded with ``seed``, so an agent keeps its clothes from
-    frame to frame and run to run; each colour varied by ±8 % in brightness."""
-    rng = np.random.default_rng(seed)
+    """``(n, 3, 3)`` skin, top and trousers for agents ``0..n−1`` (``--color-by tint``): each
+    agent's picks from fixed palettes and ±8 % brightness come from a hash of its id and
+    ``seed``, so an agent keeps its clothes from frame to frame, run to run, and whatever the
+    crowd's size."""
+    ids = np.arange(n, dtype=np.uint64) + np.uint64(1)
+    with np.errstate(over="ignore"):
+        h = [_mix(ids * np.uint64(0x9E3779B97F4A7C15) + np.uint64(seed * 7 + k)) for k in range(6)]
     out = np.empty((n, 3, 3), np.float32)
-    out[:, 0] = _SKIN_TONES[rng.integers(len(_SKIN_TONES), size=n)]
-    out[:, 1] = _CLOTHES[rng.integers(len(_CLOTHES), size=n)]
-    out[:, 2] = _TROUSERS[rng.integers(len(_TROUSERS), size=n)]
-    out *= rng.uniform(0.92, 1.08, size=(n, 3, 1)).astype(np.float32)
+    for part, table in enumerate((_SKIN_TONES, _CLOTHES, _TROUSERS)):
+        pick = (h[part] % np.uint64(len(table))).astype(np.int64)
+        shade = 0.92 + 0.16 * (h[part + 3] >> np.uint64(11)).astype(np.float64) / 2.0**53
+        out[:, part] = table[pick] * shade[:, None].astype(np.float32)
     return np.clip(out, 0.0, 1.0)
