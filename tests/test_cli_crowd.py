@@ -135,6 +135,44 @@ def test_render_scenario_to_mp4_by_group(
     assert result["ms_per_frame_median"] > 0
 
 
+def test_render_styles_differ(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Bodies (the default) and capsules draw the same scene differently; both by tint, and
+    capsules by level too."""
+    import imageio.v3 as iio
+
+    scene = tmp_path / "small.toml"
+    scene.write_text(SMALL)
+    images = {}
+    for style, color in (("body", "tint"), ("capsules", "tint"), ("capsules", "level")):
+        folder = tmp_path / f"{style}_{color}"
+        code, result = _json(
+            capsys,
+            [
+                "render",
+                str(scene),
+                "--out",
+                str(folder),
+                "--frames",
+                "2",
+                "--size",
+                "160x120",
+                "--style",
+                style,
+                "--color-by",
+                color,
+                "--json",
+            ],
+        )
+        assert code == 0 and result["frames"] == 2
+        images[style, color] = iio.imread(sorted(folder.glob("*.png"))[-1]).astype(int)
+    for a, b in (
+        (("body", "tint"), ("capsules", "tint")),
+        (("capsules", "tint"), ("capsules", "level")),
+    ):
+        changed = np.abs(images[a] - images[b]).max(axis=-1) > 8
+        assert changed.mean() > 0.002, f"{a} and {b} draw alike"
+
+
 def test_export_agent_to_bvh_round_trips(
     recording: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -150,6 +188,51 @@ def test_export_agent_to_bvh_round_trips(
     np.testing.assert_allclose(
         np.asarray(clip.root_positions)[:, [0, 2]], rec["position"][:, 7], atol=1e-4
     )
+
+
+def test_export_crowd_to_glb(
+    recording: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The whole crowd (or some agents over some frames) as one glTF binary: one skin per
+    agent, an animation as long as the frames asked for, the size reported."""
+    import pygltflib as gl
+
+    out, _ = recording
+    n = np.load(out)["position"].shape[1]
+    glb = tmp_path / "crowd.glb"
+    code, result = _json(
+        capsys, ["export", str(out), "--format", "glb", "--out", str(glb), "--json"]
+    )
+    assert code == 0 and result["agents"] == n and result["frames"] == 20
+    assert result["bytes"] == glb.stat().st_size
+    doc = gl.GLTF2().load(str(glb))
+    assert len(doc.skins) == n and len(doc.animations) == 1
+    code, result = _json(
+        capsys,
+        [
+            "export",
+            str(out),
+            "--format",
+            "glb",
+            "--out",
+            str(glb),
+            "--agents",
+            "0",
+            "3",
+            "--frames",
+            "5:15",
+            "--json",
+        ],
+    )
+    assert code == 0 and result["agents"] == 2 and result["frames"] == 10
+    doc = gl.GLTF2().load(str(glb))
+    assert len(doc.skins) == 2
+    assert doc.accessors[doc.animations[0].samplers[0].input].count == 10
+    code, result = _json(
+        capsys,
+        ["export", str(out), "--format", "glb", "--out", str(glb), "--frames", "9:3", "--json"],
+    )
+    assert code == 2 and "--frames" in result["error"]["message"]
 
 
 def test_export_needs_a_full_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -99,8 +99,13 @@ def write_crowd_glb(
     if not agents:
         raise JcrowdError(f"{os.fspath(path)}: expected at least one agent to export, found none")
     frames = agents[0].motion.num_frames
-    skeleton = agents[0].motion.skeleton
+    names = agents[0].motion.skeleton.names
     for k, a in enumerate(agents):
+        if a.motion.skeleton.names != names:
+            raise JcrowdError(
+                f"{os.fspath(path)}: agent {k}: expected the skeleton of the first agent (one "
+                "body mesh is shared), found another"
+            )
         if a.motion.num_frames != frames or len(a.alive) != frames:
             raise JcrowdError(
                 f"{os.fspath(path)}: agent {k}: expected {frames} frames like the first, found "
@@ -117,9 +122,9 @@ def write_crowd_glb(
     animation = gl.Animation(name="crowd", samplers=[], channels=[])
     scene_nodes = doc.scenes[0].nodes
     for k, agent in enumerate(agents):
-        joint_nodes = _skeleton_nodes(doc, skeleton, agent, k)
+        joint_nodes = _skeleton_nodes(doc, agent.motion.skeleton, agent, k)
         scene_nodes.append(joint_nodes[0])
-        ibm = np.zeros((skeleton.num_joints, 4, 4), np.float32)
+        ibm = np.zeros((len(joint_nodes), 4, 4), np.float32)
         h = agent.height
         ibm[:, 0, 0] = ibm[:, 1, 1] = ibm[:, 2, 2] = h
         ibm[:, :3, 3] = -h * np.asarray(rest, np.float64)
