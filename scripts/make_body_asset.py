@@ -98,7 +98,11 @@ def reduce_mesh(
     s.setMesh(verts, tris)
     s.simplify_mesh(target_count=triangles, aggressiveness=7, preserve_border=True, verbose=0)
     v, t, _ = s.getMesh()
-    return np.asarray(v, np.float64), np.asarray(t, np.int64)
+    t = np.asarray(t, np.int64)
+    used = np.unique(t)  # the reduction can leave vertices no triangle uses
+    remap = np.full(len(v), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return np.asarray(v, np.float64)[used], remap[t]
 
 
 def blender_to_obj(p: list[float]) -> np.ndarray:
@@ -113,9 +117,18 @@ def vertex_normals(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
     a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
     face = np.cross(b - a, c - a)
     n = np.zeros_like(verts)
+    unit = np.zeros_like(verts)
+    face_unit = face / np.maximum(np.linalg.norm(face, axis=1, keepdims=True), 1e-12)
     for k in range(3):
         np.add.at(n, tris[:, k], face)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        np.add.at(unit, tris[:, k], face_unit)
+    # A vertex whose faces cancel (a fold left by the reduction) takes their unit normals'
+    # mean, and failing that "up": glTF wants unit normals.
+    weak = np.linalg.norm(n, axis=1) < 1e-9
+    n[weak] = unit[weak]
+    weak = np.linalg.norm(n, axis=1) < 1e-9
+    n[weak] = (0.0, 1.0, 0.0)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
 def transfer_weights(src: np.ndarray, weights: np.ndarray, dst: np.ndarray) -> np.ndarray:

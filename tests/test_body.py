@@ -101,6 +101,8 @@ def test_shipped_body_has_five_resolutions_with_valid_weights(body: Body) -> Non
         np.testing.assert_allclose(m.weights.sum(axis=1), 1.0, atol=1e-6)
         assert (m.weights >= 0).all() and m.bones.max() < len(body.bones)
         assert np.isfinite(m.vertices).all() and m.triangles.max() < len(m.vertices)
+        np.testing.assert_allclose(np.linalg.norm(m.normals, axis=1), 1.0, atol=1e-5)  # glTF
+        assert len(np.unique(m.triangles)) == len(m.vertices)  # no stray vertices
     # Soles on the ground, 1.6–1.8 m tall, facing +z (the nose is in front of the ears).
     v = body.meshes[0].vertices
     assert abs(v[:, 1].min()) < 1e-3 and 1.6 < v[:, 1].max() < 1.8
