@@ -270,12 +270,14 @@ class BoundBody:
     """A body bound to a skeleton: meshes whose ``bones`` index the skeleton's joints and whose
     vertices stand in the skeleton's rest pose for a 1 m skeleton (``rest`` the joints' rest
     positions, ``(J, 3)``; ``scale`` the rig-to-skeleton factor ``s``; ``joint_of_bone`` each
-    rig bone's joint, -1 for none)."""
+    rig bone's joint, -1 for none; ``fitted`` each rig bone's joint after the fit, ``(B, 3)``,
+    where the rest vertices were moved with it)."""
 
     meshes: tuple[BodyMesh, ...]
     rest: Float[np.ndarray, "J 3"]
     joint_of_bone: Int[np.ndarray, " B"]
     scale: float
+    fitted: Float[np.ndarray, "B 3"] | None = None
 
 
 def _rest_unit(skeleton: Skeleton) -> tuple[np.ndarray, float]:
@@ -463,7 +465,13 @@ def bind_body(body: Body, skeleton: Skeleton, forward: np.ndarray | None = None)
                 regions,
             )
         )
-    return BoundBody(tuple(meshes), rest.astype(np.float32), jb, s)
+    fitted = np.stack(
+        [
+            maps[int(owner[b])][0] @ (heads[b] - maps[int(owner[b])][1]) + maps[int(owner[b])][2]
+            for b in range(len(body.bones))
+        ]
+    )
+    return BoundBody(tuple(meshes), rest.astype(np.float32), jb, s, fitted)
 
 
 def _bone_maps(
