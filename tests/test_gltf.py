@@ -28,14 +28,14 @@ def crowd(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[CrowdAge
     skeleton = skeleton.scaled(1.0 / character_height(skeleton))  # a 1 m model skeleton
     bound = bind_body(load_body(body_path()), skeleton, rest_forward(skeleton))
     agents = []
-    for k, (h, x) in enumerate(((1.62, 0.0), (1.85, 2.0))):
+    for k, (h, x) in enumerate(((1.62, 0.0), (1.85, 2.0), (1.71, -1.5))):
         walk, _ = procedural_walk(cycles=1, fps=FPS, seed=k)
         rot = np.asarray(walk.rotations, np.float32)
         root = np.asarray(walk.root_positions, np.float64)
         root = root / character_height(walk.skeleton) * h + [x, 0.0, 0.0]
         motion = Motion(skeleton.scaled(h), rot, root.astype(np.float32), FPS)
         alive = np.ones(motion.num_frames, bool)
-        alive[:3] = k == 0  # the second agent enters at frame 3
+        alive[:3] = k != 1  # the second agent enters at frame 3
         colors = np.array([[0.8, 0.6, 0.5], [0.2, 0.3, 0.7], [0.3, 0.3, 0.3]], np.float32)
         agents.append(CrowdAgent(motion, h, alive, colors))
     path = tmp_path_factory.mktemp("glb") / "crowd.glb"
@@ -155,12 +155,11 @@ def test_mismatched_agents_raise_and_leave_no_file(crowd, tmp_path: Path) -> Non
 
 def test_joint_world_positions_equal_the_fk(crowd) -> None:  # type: ignore[no-untyped-def]
     """Each joint node's world position, as a glTF client composes the nodes' animated TRS,
-    equals jcrowd's FK of the same agent to 1 mm, for every agent at five frames."""
+    equals jcrowd's FK of the same agent to 1 mm, for three agents at five frames."""
     path, agents, _ = crowd
-    for frame in (0, 4, 11, 19, agents[0].motion.num_frames - 1):
+    assert len(agents) == 3
+    for frame in (3, 4, 11, 19, agents[0].motion.num_frames - 1):
         for k, a in enumerate(agents):
-            if not a.alive[frame]:
-                continue
             _, want = forward_kinematics(
                 a.motion.skeleton,
                 np.asarray(a.motion.rotations[frame], np.float64),
