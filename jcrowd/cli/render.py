@@ -1,8 +1,11 @@
 """``jcrowd render SCENARIO.toml|RUN.npz --out out.mp4|out.gif|DIR``: headless crowd rendering.
 
 From a scenario the crowd is stepped and drawn frame by frame (step and draw timed apart); from
-a recording of ``jcrowd run --record visible|all`` the recorded joints are drawn. One instanced
-draw per LOD level, agents coloured by level (default, like paper 000 Fig. 6) or by group. The
+a recording of ``jcrowd run --record visible|all`` the recorded joints are drawn (bodies are
+bound to the model the recording names, or ``--model``). Agents are skinned bodies
+(``--style body``, default; :mod:`jcrowd.render.bodies`) or capsules round the bones
+(``--style capsules``, the debug view), in clothes of their own (``--color-by tint``, default),
+or coloured by level (like paper 000 Fig. 6) or by group. The
 output is an MP4 or GIF clip, or a folder of numbered PNG frames. ``--json`` prints ``frames``,
 ``out``, ``ms_per_frame_median`` (drawing and read-back), ``ms_per_step_median`` (scenarios).
 ``--eye X,Y,Z --target X,Y,Z`` sees a scenario from a fixed camera of one's own (a close-up,
@@ -291,11 +294,19 @@ def render_scenario(
 
 
 def render_recording(
-    path: str, out: str, size: tuple[int, int] | None, frames: int | None, color_by: str
+    path: str,
+    out: str,
+    size: tuple[int, int] | None,
+    frames: int | None,
+    color_by: str,
+    style: str = "body",
+    model_path: str | None = None,
 ) -> dict[str, Any]:
-    """Draw the joints recorded by ``jcrowd run --record visible|all``."""
+    """Draw the joints recorded by ``jcrowd run --record visible|all``: as bodies (bound to the
+    model the recording names, or ``model_path``) or capsules."""
     from jcrowd.errors import RenderError
     from jcrowd.render import CrowdRenderer, LevelInstances, View
+    from jcrowd.render.bodies import tint_palette
 
     rec = np.load(path)
     nlev = int(rec["levels"]) if "levels" in rec else 0
@@ -309,6 +320,21 @@ def render_recording(
     n_frames = steps if frames is None else min(frames, steps)
     caps = [rec[f"points_{lv}"].shape[1] for lv in range(nlev)]
     w, h = size or (1280, 720)
+    bodies = None
+    if style == "body":
+        from jcrowd.io.model_file import load_motion_model
+
+        name = model_path or (str(rec["model"]) if "model" in rec else "")
+        if not name:
+            raise RenderError(f"{path}: names no model to bind bodies to; pass --model")
+        model, _ = load_motion_model(name)
+        if len(model.levels) != nlev:
+            raise RenderError(
+                f"{path}: recorded {nlev} levels, the model {name} has {len(model.levels)}"
+            )
+        bodies = body_levels(model)
+    heights = np.asarray(rec["height"], np.float32)
+    tints = tint_palette(len(heights))
     group_colors = np.asarray(rec["color"], np.float32)
     fov, near, far = (float(v) for v in rec["lens"])
     draw_ms = []
@@ -321,21 +347,31 @@ def render_recording(
         # Recordings of scenarios with a layout carry its prisms (jcrowd run).
         obstacles = rec["obstacles"] if "obstacles" in rec else None
         with CrowdRenderer(
-            meshes, w, h, capacity=caps + ([n] if dots else []), obstacles=obstacles
+            meshes,
+            w,
+            h,
+            capacity=caps + ([n] if dots else []),
+            obstacles=obstacles,
+            bodies=None if bodies is None else [*bodies] + ([None] if dots else []),
+            sky=bodies is not None,
         ) as renderer:
             for i in range(n_frames):
                 t = time.perf_counter()
-                levels = [
-                    LevelInstances(
-                        rec[f"points_{lv}"][i],
-                        rec[f"valid_{lv}"][i],
-                        _colors(color_by, lv, rec[f"slots_{lv}"][i], group_colors),
+                levels = []
+                for lv in range(nlev):
+                    slots = rec[f"slots_{lv}"][i]
+                    cols = _colors(color_by, lv, slots, group_colors, tints)
+                    if bodies is None:
+                        cols = _for_capsules(cols)
+                    tall = heights[np.minimum(slots, len(heights) - 1)]
+                    levels.append(
+                        LevelInstances(rec[f"points_{lv}"][i], rec[f"valid_{lv}"][i], cols, tall)
                     )
-                    for lv in range(nlev)
-                ]
                 if dots:
                     sticks = _dot_sticks(rec["position"][i], rec["height"])
-                    colors = _colors(color_by, nlev, np.arange(n), group_colors)
+                    colors = _for_capsules(
+                        _colors(color_by, nlev, np.arange(n), group_colors, tints)
+                    )
                     levels.append(LevelInstances(sticks, rec["dots"][i], colors))
                 view = View(
                     tuple(rec["eye"][i]), tuple(rec["target"][i]), fov_deg=fov, near=near, far=far
@@ -366,7 +402,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
             raise RenderError("--eye/--target: a recording keeps its camera; give a scenario")
         size = parse_size(args.size, (1280, 720))
-        result = render_recording(args.source, args.out, size, args.frames, args.color_by)
+        result = render_recording(
+            args.source, args.out, size, args.frames, args.color_by, args.style, args.model
+        )
     else:
         scenario = fixed_camera(load_scenario(args.source), args.eye, args.target)
         model, _ = load_model(scenario, args.model)
