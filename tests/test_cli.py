@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 import subprocess
@@ -190,6 +191,14 @@ def test_fit_writes_a_model_and_a_report(
     assert (
         model.control_names == ("dx", "dz", "dyaw") and extra["fit"]["samples"] == result["samples"]
     )
+    # The file names its data by the folder's name and the clips' checksums, not by a path of
+    # this machine (issue 21).
+    fit = extra["fit"]
+    assert fit["dataset"] == cmu16_dir.name and "data_dir" not in fit
+    assert len(fit["clip_sha256"]) == result["clips"] and fit["out"] == "m.jcm"
+    assert str(tmp_path) not in json.dumps(extra) and str(cmu16_dir) not in json.dumps(extra)
+    some = sorted(fit["clip_sha256"])[0]
+    assert fit["clip_sha256"][some] == hashlib.sha256((cmu16_dir / some).read_bytes()).hexdigest()
     assert {p.name for p in report.iterdir()} == {
         "report.txt",
         "levels.png",

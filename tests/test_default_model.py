@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import jcrowd
 from jcrowd.io import default_model_path
@@ -21,3 +22,38 @@ def test_default_model_loads_and_turns() -> None:
         end = np.asarray(clip.root_positions)[-1]
         assert np.sign(end[0]) == np.sign(dyaw)  # turning left ends to the left (+x)
         assert clip.num_frames > 30
+
+
+def test_default_model_metadata_names_no_path_of_this_machine(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`jcrowd inspect` of the shipped model holds no absolute path (the model was fitted on a
+    developer's machine): the dataset is named by its folder and its clips' checksums
+    (issue 21). A string is a path of a machine when it starts with "/" or a drive letter."""
+    import json
+    import re
+
+    from jcrowd.cli import main
+
+    # As the issue runs it: from the repository root, with the relative path (inspect echoes
+    # the path it is given as "file").
+    root = default_model_path().parents[2]
+    monkeypatch.chdir(root)
+    assert main(["inspect", "jcrowd/assets/default_model.jcm", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+
+    def strings(x: object):  # type: ignore[no-untyped-def]
+        if isinstance(x, str):
+            yield x
+        elif isinstance(x, dict):
+            for k, v in x.items():
+                yield k
+                yield from strings(v)
+        elif isinstance(x, list):
+            for v in x:
+                yield from strings(v)
+
+    absolute = [s for s in strings(report) if re.match(r"^(/|[A-Za-z]:[\\\\/])", s)]
+    assert absolute == []
+    fit = report["fit"]
+    assert fit["dataset"] == "cmu16" and len(fit["clip_sha256"]) == fit["clips"]

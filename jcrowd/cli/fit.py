@@ -93,13 +93,36 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "out": str(args.out),
     }
     result["seconds"] = time.perf_counter() - start
-    save_motion_model(args.out, model, extra={"fit": result})
+    save_motion_model(args.out, model, extra={"fit": stored_fit(result, clips, args.data_dir)})
     if args.report:
         from jcrowd.io.report import write_fit_report
 
         result["report"] = str(write_fit_report(args.report, result, tensor, model))
     emit(result, args.json, _print_summary)
     return result
+
+
+def stored_fit(result: dict[str, Any], clips: Any, data_dir: str) -> dict[str, Any]:
+    """The fit's report as the model file keeps it: no path of the machine that fitted it (the
+    dataset by its folder's name, the output by its file name) and every clip's SHA-256 by its
+    path inside the dataset, so a model names the data it came from and a rebuild can be
+    checked against it (issue 21)."""
+    import hashlib
+    from pathlib import Path
+
+    root = Path(data_dir).resolve()
+    sums = {}
+    for clip in clips:
+        path = Path(clip.path).resolve()
+        name = path.relative_to(root).as_posix() if path.is_relative_to(root) else path.name
+        sums[name] = hashlib.sha256(path.read_bytes()).hexdigest()
+    stored = {k: v for k, v in result.items() if k not in ("data_dir", "out", "report")}
+    return {
+        **stored,
+        "dataset": root.name,
+        "clip_sha256": dict(sorted(sums.items())),
+        "out": Path(str(result["out"])).name,
+    }
 
 
 def _print_summary(result: dict[str, Any]) -> None:
