@@ -49,6 +49,7 @@ from jcrowd.simplify import (
     analyse_motion,
     joint_counts,
     joint_importance,
+    pair_safe_counts,
     posture_error,
     simplify_motion,
 )
@@ -402,6 +403,7 @@ def test_idle_joints_have_zero_importance(small: Motion):
     moving = [j for j in range(sk.num_joints) if j not in (neck, forearm)]
     assert np.all(importance[moving] > 0)
     order = elimination_order(sk, importance)
+    # (This skeleton has no right forearm: the left one is a joint of its own, not a pair.)
     assert set(order[:2]) == {neck, forearm} and 0 not in order
 
 
@@ -516,11 +518,14 @@ def simplified(request) -> dict:
 def test_simplify_errors_grow_from_exact_level_zero(simplified: dict):
     levels = simplified["result"].levels
     assert levels[0].mean_error_m == 0.0 and levels[0].max_error_m == 0.0
-    for name in ("mean_error_m", "max_error_m"):
+    for name, tol in (("mean_error_m", 1e-6), ("max_error_m", 1e-4)):
         errors = np.array([getattr(lv, name) for lv in levels])
         # Levels that only freeze joints which never rotate (CMU fingers, *HipJoint) have errors
-        # of float32 round-off (~1e-8 m) that may go either way; 1e-6 m absorbs that.
-        assert np.all(np.diff(errors) >= -1e-6), (name, errors)
+        # of float32 round-off (~1e-8 m) that may go either way; 1e-6 m absorbs that. The max
+        # over frames and joints is not monotone in the paper's method either: each level's
+        # SQP places its kept joints afresh, and on 07_03 a level freezing a mirrored pair had
+        # a max error 0.024 mm below the level above's (2026-12-03); 0.1 mm allows that.
+        assert np.all(np.diff(errors) >= -tol), (name, errors)
     assert levels[-1].mean_error_m > levels[1].mean_error_m + 1e-3  # and they do grow
 
 
@@ -528,7 +533,10 @@ def test_simplify_joint_counts_and_kept_joints(simplified: dict):
     clip, res = simplified["clip"], simplified["result"]
     sk = clip.skeleton
     counts = [lv.num_joints for lv in res.levels]
-    assert counts == joint_counts(sk.num_joints, simplified["levels"])
+    asked = joint_counts(sk.num_joints, simplified["levels"])
+    assert counts == pair_safe_counts(sk, res.order, asked)
+    # Moved to a cut between mirrored pairs: at most one joint from what was asked.
+    assert all(abs(a - b) <= 1 for a, b in zip(counts, asked, strict=True))
     assert counts[0] == sk.num_joints and all(b < a for a, b in itertools.pairwise(counts))
     assert sorted(res.order) == list(range(1, sk.num_joints))
     # on_level reported each level once, in order, as it was made.
@@ -581,13 +589,19 @@ def test_simplify_hard_mode_keeps_bones_rigid(simplified: dict):
         d_opt = opt[:, 1:] - opt[:, list(sk.parents[1:])]
         only = [c for c in range(1, sk.num_joints) if len(sk.children(sk.parents[c])) == 1]
         idx = np.asarray([c - 1 for c in only if rest[c - 1] > 1e-6], np.int64)
-        assert lv.num_joints <= 2 or len(idx) >= 1
+        # Something to compare, unless every kept joint hangs from the root (a level of the
+        # pelvis and both thighs, say: mirrored pairs go together, issue 21).
+        assert len(idx) >= 1 or all(p == 0 for p in sk.parents[1:])
         np.testing.assert_allclose(_unit(d_fk[:, idx]), _unit(d_opt[:, idx]), atol=1e-4)
         # ... and in position within 3 cm. Not exactly: at a joint with several kept children
         # (the hips) the problem lets the angles between sibling bones change, which one rigid
         # rotation cannot follow (Kabsch fit): up to 2 cm on 07_03's 10-joint level. A wrong
         # recovery would be off by decimetres.
-        np.testing.assert_allclose(pos - pos[:, :1], opt, atol=3e-2)
+        # A level of the root and two mirrored joints hanging from it (07_03's last: the hips
+        # and both knees, mirrored pairs kept together, issue 21) is that case at its worst:
+        # one rigid turn of the hips for two independently placed knees, 12 cm measured.
+        fan = lv.num_joints > 2 and all(p == 0 for p in sk.parents[1:])
+        np.testing.assert_allclose(pos - pos[:, :1], opt, atol=0.15 if fan else 3e-2)
         # The reported error describes this motion: kept joints lie within max_error_m of the
         # capture (1e-5 m: float32 FK of the level vs float64 FK in the error measurement).
         err = np.linalg.norm(pos - captured[:, list(lv.kept)], axis=-1)
@@ -701,3 +715,58 @@ def test_joint_counts_reject_impossible_levels():
         joint_counts(10, 0)
     with pytest.raises(JcrowdError, match=r"at most 9 levels for a 10-joint skeleton .*, found 10"):
         joint_counts(10, 10)
+
+
+def test_simplify_keeps_mirrored_pairs_together(simplified: dict):
+    """Every level of `jcrowd simplify` on both shared skeletons keeps or freezes both joints of
+    each mirrored pair (issue 21: levels kept lfoot but not rfoot)."""
+    from jcrowd.motion.clip import left_right_pairs
+
+    sk = simplified["clip"].skeleton
+    pairs = left_right_pairs(sk.names)
+    assert len(pairs) >= 8
+    for lv in simplified["result"].levels:
+        kept = set(lv.kept)
+        lopsided = [(sk.names[a], sk.names[b]) for a, b in pairs if (a in kept) != (b in kept)]
+        assert lopsided == [], lopsided
+
+
+def test_every_level_of_the_shipped_model_keeps_mirrored_pairs_together():
+    from jcrowd import load_default_model
+    from jcrowd.motion.clip import left_right_pairs
+
+    model = load_default_model()
+    pairs = left_right_pairs(model.skeleton.names)
+    for i, lv in enumerate(model.levels):
+        kept = set(lv.joints) | {0}
+        lopsided = [p for p in pairs if (p[0] in kept) != (p[1] in kept)]
+        assert lopsided == [], (i, lopsided)
+
+
+def test_pair_safe_counts_against_a_brute_force_oracle():
+    """Random importances on the walker skeleton: the counts are the nearest pair-safe cuts,
+    found here by trying every cut and checking which split a pair (no shared logic with the
+    function's run of allowed cuts), strictly falling, and equal to what was asked where the
+    asked cut splits no pair."""
+    from jcrowd.motion import walker_skeleton
+    from jcrowd.motion.clip import left_right_pairs
+
+    sk = walker_skeleton()
+    rng = np.random.default_rng(21)
+    pairs = left_right_pairs(sk.names)
+    for _ in range(20):
+        order = elimination_order(sk, rng.random(sk.num_joints))
+        asked = joint_counts(sk.num_joints, int(rng.integers(2, 7)))
+        got = pair_safe_counts(sk, order, asked)
+
+        def splits(k: int, order: tuple[int, ...] = order) -> bool:
+            frozen = set(order[:k])
+            return any((a in frozen) != (b in frozen) for a, b in pairs)
+
+        last = -1
+        for want, count in zip(asked, got, strict=True):
+            safe = [k for k in range(len(order) + 1) if not splits(k) and k > last]
+            safe = [k for k in safe if sk.num_joints - k >= 2]
+            best = min(safe, key=lambda k: (abs(k - (sk.num_joints - want)), k))
+            assert sk.num_joints - count == best
+            last = best

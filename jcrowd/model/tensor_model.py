@@ -34,7 +34,7 @@ from jcrowd.model.samples import CONTROL_NAMES, Sample, gait_samples, reference_
 from jcrowd.motion.clip import Clip, resample
 from jcrowd.motion.rotation import quat_rotate, yaw_quat
 from jcrowd.motion.skeleton import Skeleton, forward_kinematics
-from jcrowd.simplify import elimination_order, joint_counts, joint_importance
+from jcrowd.simplify import elimination_order, joint_counts, joint_importance, pair_safe_counts
 from jcrowd.tensor.algebra import Tucker, reconstruct
 from jcrowd.tensor.keylevels import StorageReport, key_levels, tucker_storage
 
@@ -191,7 +191,8 @@ def build_tensor_model(
     )
     min_r = config.min_ranks or (min(7, max_r[0]), min(7, max_r[1]), min(9, max_r[2]))
     kl = key_levels(tensor, config.key_levels, max_r, min_r)
-    counts = joint_counts(skel.num_joints, config.key_levels)
+    # Mirrored pairs are kept or frozen together at every level (issue 21).
+    counts = pair_safe_counts(skel, order, joint_counts(skel.num_joints, config.key_levels))
     levels = tuple(
         TensorLevel(level.tucker, _kept(order, skel.num_joints, count), level.mse)
         for level, count in zip(kl.levels, counts, strict=True)

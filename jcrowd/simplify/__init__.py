@@ -13,6 +13,7 @@ from jcrowd.simplify.analysis import key_posture as key_posture
 from jcrowd.simplify.analysis import posture_error as posture_error
 from jcrowd.simplify.levels import Weights as Weights
 from jcrowd.simplify.levels import joint_counts as joint_counts
+from jcrowd.simplify.levels import pair_safe_counts as pair_safe_counts
 from jcrowd.simplify.pipeline import SimplifiedLevel as SimplifiedLevel
 from jcrowd.simplify.pipeline import SimplifiedLevels as SimplifiedLevels
 from jcrowd.simplify.pipeline import simplify_motion as simplify_motion

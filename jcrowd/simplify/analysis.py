@@ -47,7 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jcrowd.errors import MotionError
-from jcrowd.motion.clip import Motion
+from jcrowd.motion.clip import Motion, left_right_pairs
 from jcrowd.motion.rotation import _xp, quat_rotate
 from jcrowd.motion.skeleton import Skeleton, rest_positions
 
@@ -210,10 +210,31 @@ def joint_importance(motions: Motion | Sequence[Motion]) -> np.ndarray:
 
 
 def elimination_order(skeleton: Skeleton, importance: np.ndarray) -> tuple[int, ...]:
-    """Non-root joints, least important first (ties: deepest first, then lowest index)."""
+    """Non-root joints, least important first (ties: deepest first, then lowest index), a
+    mirrored pair (left and right names, :func:`jcrowd.motion.clip.left_right_pairs`) side by
+    side, left first, at the larger of its two importances.
+
+    Why pairs (issue 21): on mirrored data the two importances of a pair are nearly equal, and
+    ranked apart the tie fell by noise, so a level kept one knee and froze the other. Ranked as
+    one at the larger importance, a pair goes only when neither side is needed; a level's cut
+    then falls between pairs (:func:`jcrowd.simplify.levels.pair_safe_counts`).
+    """
     depth = skeleton.depths
-    joints = range(1, skeleton.num_joints)
-    return tuple(sorted(joints, key=lambda j: (float(importance[j]), -int(depth[j]), j)))
+    partner: dict[int, int] = {}
+    for a, b in left_right_pairs(skeleton.names):
+        partner[a], partner[b] = b, a
+    units: list[tuple[int, ...]] = []
+    for j in range(1, skeleton.num_joints):
+        other = partner.get(j)
+        if other is None or other == 0:
+            units.append((j,))
+        elif j < other:
+            units.append((j, other))
+
+    def key(unit: tuple[int, ...]) -> tuple[float, int, int]:
+        return (max(float(importance[j]) for j in unit), -int(depth[unit[0]]), unit[0])
+
+    return tuple(j for unit in sorted(units, key=key) for j in unit)
 
 
 def key_posture(motion: Motion, key_frames: np.ndarray) -> np.ndarray:

@@ -33,7 +33,14 @@ from jcrowd.errors import MotionError
 from jcrowd.motion.rotation import quat_rotate
 from jcrowd.motion.skeleton import Skeleton, forward_kinematics
 
-__all__ = ["LevelPlan", "Weights", "joint_counts", "plan_level", "position_problem"]
+__all__ = [
+    "LevelPlan",
+    "Weights",
+    "joint_counts",
+    "pair_safe_counts",
+    "plan_level",
+    "position_problem",
+]
 
 
 @dataclass(frozen=True)
@@ -90,6 +97,32 @@ def joint_counts(num_joints: int, levels: int, lowest_fraction: float = 0.08) ->
         target = min(round(num_joints * fracs[i]), counts[-1] - 1)
         counts.append(max(target, 2 + (levels - 1 - i)))
     return counts
+
+
+def pair_safe_counts(skeleton: Skeleton, order: tuple[int, ...], counts: list[int]) -> list[int]:
+    """``counts`` moved so that no level keeps one joint of a mirrored pair and freezes the
+    other (issue 21): each level freezes a prefix of ``order`` (:func:`plan_level`) that ends
+    between two pairs — the nearest such cut to the one asked for, the smaller on a tie, and
+    past the level above's so the counts still fall strictly. Pairs must sit side by side in
+    ``order`` (:func:`jcrowd.simplify.analysis.elimination_order` puts them so); a level that
+    finds no such cut left keeps the count it asked for.
+    """
+    from jcrowd.motion.clip import left_right_pairs
+
+    partner: dict[int, int] = {}
+    for a, b in left_right_pairs(skeleton.names):
+        partner[a], partner[b] = b, a
+    n = len(order)
+    cuts = [k for k in range(n + 1) if k in (0, n) or partner.get(order[k - 1]) != order[k]]
+    j = skeleton.num_joints
+    out, last = [], -1
+    for count in counts:
+        want = j - count
+        options = [k for k in cuts if k > last and j - k >= 2]
+        best = min(options, key=lambda k: (abs(k - want), k)) if options else max(want, last + 1)
+        out.append(j - best)
+        last = best
+    return out
 
 
 def plan_level(

@@ -34,6 +34,7 @@ from jcrowd.simplify.levels import (
     Weights,
     _cosines,
     joint_counts,
+    pair_safe_counts,
     plan_level,
     position_problem,
 )
@@ -281,6 +282,8 @@ def simplify_motion(
         raise MotionError("simplify: the clip has NaN or infinite rotations or positions")
     analysis = analyse_motion(motion)
     order = order or elimination_order(sk, analysis.importance)
+    # A level keeps or freezes both joints of a mirrored pair (issue 21).
+    counts = pair_safe_counts(sk, tuple(order), list(counts))
     key = key_posture(motion, analysis.key_frames)
     glob, pos = forward_kinematics(sk, rot, root)
     rel = pos - pos[:, :1]
