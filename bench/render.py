@@ -44,8 +44,9 @@ import jcrowd.render.bodies as bodies_module
 from jcrowd.io.body_file import load_body
 from jcrowd.io.resources import body_path
 from jcrowd.motion import character_height, forward_kinematics, procedural_walk, rest_forward
-from jcrowd.motion.body import bind_body, skeleton_level
+from jcrowd.motion.body import bind_body
 from jcrowd.motion.skeleton import end_site_positions
+from jcrowd.motion.skinning import skeleton_level
 from jcrowd.render import (
     LEVEL_COLORS,
     CrowdRenderer,

@@ -19,15 +19,17 @@ from jcrowd.motion.body import (
     Body,
     BodyMesh,
     bind_body,
-    frames_from_points,
-    level_skin,
     map_bones,
-    rest_offsets,
-    skin,
 )
 from jcrowd.motion.body import _monotone_pairs as monotone_pairs
 from jcrowd.motion.rotation import quat_from_expmap, quat_from_matrix
 from jcrowd.motion.skeleton import Skeleton, forward_kinematics, rest_positions
+from jcrowd.motion.skinning import (
+    frames_from_points,
+    level_skin,
+    rest_offsets,
+    skin,
+)
 
 RNG = np.random.default_rng(20)
 

@@ -1,6 +1,6 @@
 """Whole-crowd glTF export (issue 20): the file, read back with pygltflib and evaluated as a glTF
 client does (node TRS → 4×4 world matrices → joint matrix × inverse bind matrix, weighted),
-draws the same skin as :func:`jcrowd.motion.body.skin` on the FK."""
+draws the same skin as :func:`jcrowd.motion.skinning.skin` on the FK."""
 
 from __future__ import annotations
 
@@ -15,9 +15,10 @@ from jcrowd.io.body_file import load_body
 from jcrowd.io.gltf_write import CrowdAgent, write_crowd_glb
 from jcrowd.io.resources import body_path
 from jcrowd.motion import character_height, procedural_walk, rest_forward, walker_skeleton
-from jcrowd.motion.body import bind_body, rest_offsets, skin
+from jcrowd.motion.body import bind_body
 from jcrowd.motion.clip import Motion
 from jcrowd.motion.skeleton import forward_kinematics
+from jcrowd.motion.skinning import rest_offsets, skin
 
 FPS = 30.0
 
@@ -69,9 +70,10 @@ def _trs(t: np.ndarray, q_xyzw: np.ndarray, s: np.ndarray) -> np.ndarray:
     return m
 
 
-def _client_skin(path: Path, agent: int, frame: int) -> np.ndarray:
-    """What a glTF client draws for ``agent``'s body at ``frame`` (nodes' rest TRS overridden
-    by the animation's values at that frame)."""
+def _client_pose(path: Path, agent: int, frame: int):  # type: ignore[no-untyped-def]
+    """A glTF client's view of ``agent`` at ``frame``: the document, its binary blob, the
+    agent's body node and the world matrix of every node (rest TRS overridden by the
+    animation's values at that frame)."""
     doc = gl.GLTF2().load(str(path))
     blob = doc.binary_blob()
     trs = {
@@ -94,6 +96,12 @@ def _client_skin(path: Path, agent: int, frame: int) -> np.ndarray:
         return world(parent[i]) @ m if i in parent else m
 
     body = next(n for n in doc.nodes if n.name == f"agent{agent}/body")
+    return doc, blob, body, world
+
+
+def _client_skin(path: Path, agent: int, frame: int) -> np.ndarray:
+    """What a glTF client draws for ``agent``'s body at ``frame``."""
+    doc, blob, body, world = _client_pose(path, agent, frame)
     sk = doc.skins[body.skin]
     ibm = _read(doc, blob, sk.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1)
     joint_m = np.stack([world(j) @ ibm[k] for k, j in enumerate(sk.joints)])
@@ -170,26 +178,8 @@ def test_joint_world_positions_equal_the_fk(crowd) -> None:  # type: ignore[no-u
 
 
 def _client_joints(path: Path, agent: int, frame: int) -> np.ndarray:
-    doc = gl.GLTF2().load(str(path))
-    blob = doc.binary_blob()
-    trs = {
-        i: [
-            np.array(n.translation or [0, 0, 0]),
-            np.array(n.rotation or [0, 0, 0, 1]),
-            np.array(n.scale or [1, 1, 1]),
-        ]
-        for i, n in enumerate(doc.nodes)
-    }
-    for ch in doc.animations[0].channels:
-        values = _read(doc, blob, doc.animations[0].samplers[ch.sampler].output)[frame]
-        trs[ch.target.node][{"translation": 0, "rotation": 1, "scale": 2}[ch.target.path]] = values
-    parent = {c: i for i, n in enumerate(doc.nodes) for c in n.children}
-
-    def world(i: int) -> np.ndarray:
-        m = _trs(*trs[i])
-        return world(parent[i]) @ m if i in parent else m
-
-    body = next(n for n in doc.nodes if n.name == f"agent{agent}/body")
+    """Each of ``agent``'s joint nodes' world positions at ``frame``, as a client composes them."""
+    doc, _, body, world = _client_pose(path, agent, frame)
     return np.stack([world(j)[:3, 3] for j in doc.skins[body.skin].joints])
 
 

@@ -34,8 +34,9 @@ from jcrowd.motion import (
     rest_positions,
     walker_skeleton,
 )
-from jcrowd.motion.body import SkinnedLevel, bind_body, skeleton_level
+from jcrowd.motion.body import bind_body
 from jcrowd.motion.skeleton import end_site_positions
+from jcrowd.motion.skinning import SkinnedLevel, skeleton_level
 from jcrowd.render import (
     LEVEL_COLORS,
     CrowdRenderer,
@@ -155,7 +156,7 @@ def scene_frame_edge() -> Scene:
 
 def walk_points() -> np.ndarray:
     """Joints then End Sites ``(F, 19 + 3, 3)`` of one walker gait cycle, root above the
-    origin: the points a skinned level reads (:func:`jcrowd.motion.body.frames_from_points`)."""
+    origin: the points a skinned level reads (:func:`jcrowd.motion.skinning.frames_from_points`)."""
     motion, _ = procedural_walk(cycles=1, fps=30.0, seed=3)
     rot, pos = forward_kinematics(motion.skeleton, motion.rotations, motion.root_positions)
     ends = end_site_positions(motion.skeleton, rot, pos)

@@ -4,7 +4,7 @@ to each level's kept joints, for a renderer that has the step's points.
 Every level gets every resolution of the body (the renderer picks one per agent by its size on
 screen, :mod:`jcrowd.render.bodies`); each resolution's weights move from the joints the level
 drops to their kept ancestor through the dropped joints' reference rotations
-(:func:`jcrowd.motion.body.level_skin`), so the skin follows the points the step places rigidly
+(:func:`jcrowd.motion.skinning.level_skin`), so the skin follows the points the step places rigidly
 off a kept joint. Host code, once per model.
 """
 
@@ -14,8 +14,9 @@ import numpy as np
 
 from jcrowd.crowd.synthesis import Decoders, _chain, build_decoders
 from jcrowd.model.motion_model import MotionModel
-from jcrowd.motion.body import BoundBody, SkinnedLevel, SkinnedMesh, level_skin
+from jcrowd.motion.body import BoundBody
 from jcrowd.motion.rotation import quat_mul
+from jcrowd.motion.skinning import SkinnedLevel, SkinnedMesh, level_skin
 
 __all__ = ["skinned_levels"]
 
@@ -23,7 +24,7 @@ __all__ = ["skinned_levels"]
 def skinned_levels(
     model: MotionModel, bound: BoundBody, decoders: Decoders | None = None
 ) -> tuple[SkinnedLevel, ...]:
-    """One :class:`~jcrowd.motion.body.SkinnedLevel` per level of ``model``, each with every
+    """One :class:`~jcrowd.motion.skinning.SkinnedLevel` per level of ``model``, each with every
     mesh of ``bound``."""
     dec = build_decoders(model) if decoders is None else decoders
     skel = model.skeleton

@@ -1,13 +1,13 @@
 """Skinned bodies, blob shadows and the sky for :class:`~jcrowd.render.CrowdRenderer` (issue 20).
 
-A level drawn as bodies (:class:`~jcrowd.motion.body.SkinnedLevel`) has every resolution of the
+A level drawn as bodies (:class:`~jcrowd.motion.skinning.SkinnedLevel`) has every resolution of the
 body. Per frame the host finds each valid agent's kept-joint frames in the points the step
-placed (:func:`~jcrowd.motion.body.frames_from_points`) and its height on screen, sorts the
+placed (:func:`~jcrowd.motion.skinning.frames_from_points`) and its height on screen, sorts the
 agents by the mesh that height asks for (:data:`MESH_PIXELS`), and writes one texture row per
 agent (allocated once for the level's capacity): three RGBA32F texels per kept joint, the rows
 of ``[h R | p]``, then three for its skin, top and bottom colours. One instanced draw per mesh
 in use reads rows ``u_row0 + gl_InstanceID``; the vertex shader blends its four joints,
-``Σ_k w_k (h R_k l_k + p_k)`` (linear-blend skinning, :func:`jcrowd.motion.body.skin`), and its
+``Σ_k w_k (h R_k l_k + p_k)`` (linear-blend skinning, :func:`jcrowd.motion.skinning.skin`), and its
 normal by ``Σ_k w_k R_k``. Each vertex has a clothing region (skin, top, bottom, shoes);
 ``colors`` of a level are ``(C, 3)`` (the top; the bottom is it darkened, the skin a fixed tone)
 or ``(C, 3, 3)`` (skin, top, bottom).
@@ -30,7 +30,8 @@ import moderngl
 import numpy as np
 
 from jcrowd.errors import RenderError
-from jcrowd.motion.body import SkinnedLevel, frames_from_points
+from jcrowd.motion.skinning import SkinnedLevel, frames_from_points
+from jcrowd.render.levels import LevelInstances
 
 __all__ = [
     "BLOB_FRAGMENT",
@@ -44,6 +45,7 @@ __all__ = [
     "BodyLevel",
     "body_colors",
     "pick_meshes",
+    "stage_bodies",
     "tint_palette",
 ]
 
@@ -287,6 +289,33 @@ class BodyLevel:
     def release(self) -> None:
         for obj in reversed(self._objects):
             obj.release()
+
+
+def stage_bodies(
+    level: BodyLevel, data: LevelInstances, index: int, view_proj: np.ndarray, height: int
+) -> int:
+    """Check one body level's input and stage its valid agents' joint frames and colours."""
+    where = f"CrowdRenderer.render: level {index}"
+    points = np.asarray(data.joints)
+    valid = np.asarray(data.valid)
+    c = points.shape[0] if points.ndim else 0
+    if points.ndim != 3 or points.shape[2] != 3 or points.shape[1] < level.num_points:
+        raise RenderError(
+            f"{where}: expected the step's points of shape (C, ≥{level.num_points}, 3), found "
+            f"{points.shape}"
+        )
+    if c > level.capacity:
+        raise RenderError(f"{where}: {c} slots passed, capacity is {level.capacity}")
+    if valid.shape != (c,) or valid.dtype != np.bool_:
+        raise RenderError(
+            f"{where}: expected valid of shape ({c},) bool, found {valid.shape} {valid.dtype}"
+        )
+    colors = np.asarray(data.colors)
+    if colors.shape not in ((c, 3), (c, 3, 3)):
+        raise RenderError(
+            f"{where}: expected colors of shape ({c}, 3) or ({c}, 3, 3), found {colors.shape}"
+        )
+    return level.stage(points, valid, colors, data.heights, view_proj, height, where)
 
 
 def pick_meshes(

@@ -27,7 +27,7 @@ import numpy as np
 from jaxtyping import Float
 
 from jcrowd.errors import RenderError
-from jcrowd.motion.body import SkinnedLevel
+from jcrowd.motion.skinning import SkinnedLevel
 from jcrowd.render.bodies import (
     BLOB_FRAGMENT,
     BLOB_VERTEX,
@@ -36,6 +36,7 @@ from jcrowd.render.bodies import (
     SKY_FRAGMENT,
     SKY_VERTEX,
     BodyLevel,
+    stage_bodies,
 )
 from jcrowd.render.camera import View, projection_matrix, view_matrix
 from jcrowd.render.context import check_gl, gl_renderer, make_context
@@ -118,7 +119,7 @@ class CrowdRenderer:
             :func:`~jcrowd.render.meshes.capsule_detail` of the level (64 triangles per bone at
             level 0, fewer for farther levels). Coarser capsules render faster, most of all on
             a software rasteriser.
-        bodies: per level, a :class:`~jcrowd.motion.body.SkinnedLevel` to draw that level's
+        bodies: per level, a :class:`~jcrowd.motion.skinning.SkinnedLevel` to draw that level's
             agents as skinned bodies (:mod:`jcrowd.render.bodies`; their
             :class:`LevelInstances` then carry every point of the step and the heights), or
             None to draw capsules; None: capsules everywhere. Bodies cast blob shadows.
@@ -298,7 +299,7 @@ class CrowdRenderer:
             )
         view_proj = projection_matrix(view, self.width, self.height) @ view_matrix(view)
         counts = [
-            _stage_body(level, data, i, view_proj, self.height)
+            stage_bodies(level, data, i, view_proj, self.height)
             if isinstance(level, BodyLevel)
             else _stage(level, data, i)
             for i, (level, data) in enumerate(zip(self._levels, levels, strict=True))
@@ -453,33 +454,6 @@ def _stage(level: _Level, data: LevelInstances, index: int) -> int:
     out[:, :, 3:6] = picked[:, level.joint_idx]
     out[:, :, 6:9] = picked_colors[:, None, :]
     return n
-
-
-def _stage_body(
-    level: BodyLevel, data: LevelInstances, index: int, view_proj: np.ndarray, height: int
-) -> int:
-    """Check one body level's input and stage its valid agents' joint frames and colours."""
-    where = f"CrowdRenderer.render: level {index}"
-    points = np.asarray(data.joints)
-    valid = np.asarray(data.valid)
-    c = points.shape[0] if points.ndim else 0
-    if points.ndim != 3 or points.shape[2] != 3 or points.shape[1] < level.num_points:
-        raise RenderError(
-            f"{where}: expected the step's points of shape (C, ≥{level.num_points}, 3), found "
-            f"{points.shape}"
-        )
-    if c > level.capacity:
-        raise RenderError(f"{where}: {c} slots passed, capacity is {level.capacity}")
-    if valid.shape != (c,) or valid.dtype != np.bool_:
-        raise RenderError(
-            f"{where}: expected valid of shape ({c},) bool, found {valid.shape} {valid.dtype}"
-        )
-    colors = np.asarray(data.colors)
-    if colors.shape not in ((c, 3), (c, 3, 3)):
-        raise RenderError(
-            f"{where}: expected colors of shape ({c}, 3) or ({c}, 3, 3), found {colors.shape}"
-        )
-    return level.stage(points, valid, colors, data.heights, view_proj, height, where)
 
 
 def _check_args(
