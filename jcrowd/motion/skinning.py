@@ -24,7 +24,7 @@ import numpy as np
 from jaxtyping import Float, Int
 
 from jcrowd.motion.body import INFLUENCES, BodyMesh, BoundBody, _merge, _rest_unit
-from jcrowd.motion.rotation import _xp, quat_rotate
+from jcrowd.motion.rotation import _xp, quat_rotate, quat_to_matrix
 from jcrowd.motion.skeleton import Skeleton
 
 __all__ = [
@@ -144,18 +144,6 @@ class SkinnedLevel:
     ref_offsets: Float[np.ndarray, "K M 3"]
 
 
-def _quat_matrix(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = (q[..., i] for i in range(4))
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )
-
-
 def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``(N, 3, 3)``: the least rotation taking unit vectors ``a`` onto ``b`` (``(N, 3)``)."""
     v = np.cross(a, b)
@@ -189,7 +177,7 @@ def frames_from_points(
     n, k = pts.shape[0], len(level.kept)
     rot = np.zeros((n, k, 3, 3))
     pos = pts[:, level.kept]
-    local = _quat_matrix(np.asarray(level.local_ref, np.float64))
+    local = quat_to_matrix(np.asarray(level.local_ref, np.float64))
     for j in range(k):
         p = level.parents[j]
         ref = local[j] if p < 0 else rot[:, p] @ local[j]
