@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import jax
 import pytest
@@ -56,6 +57,16 @@ def cmu_dir() -> Path:
 def cmu16_dir() -> Path:
     """``.../data/cmu16`` (19-joint skeleton, 30 fps, centimetres, CRLF, no T-pose)."""
     return _need("cmu16")
+
+
+@pytest.fixture(scope="session")
+def cmu16_tensor(cmu16_dir: Path) -> Any:
+    """The default tensor fit of ``cmu16`` (about a minute: the per-level refit), built once per
+    test process and shared by the files that only read it."""
+    from jcrowd.io import load_dataset
+    from jcrowd.model import build_tensor_model
+
+    return build_tensor_model(load_dataset(cmu16_dir))
 
 
 def all_clip_paths() -> list[Path]:

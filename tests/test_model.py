@@ -26,9 +26,8 @@ from jcrowd.model import (
 
 
 @pytest.fixture(scope="module")
-def fitted(cmu16_dir: Path) -> tuple[TensorModel, MotionModel]:
-    tensor = build_tensor_model(load_dataset(cmu16_dir))
-    return tensor, fit_motion_model(tensor)
+def fitted(cmu16_tensor: TensorModel) -> tuple[TensorModel, MotionModel]:
+    return cmu16_tensor, fit_motion_model(cmu16_tensor)
 
 
 def test_kriging_interpolates_the_samples(fitted: tuple[TensorModel, MotionModel]) -> None:
