@@ -115,12 +115,14 @@ def test_refit_is_exact_when_the_frozen_joints_are_already_at_the_key() -> None:
 def test_refit_batch_equals_frame_by_frame() -> None:
     # vmap == loop: each frame is its own problem. Compared by the body they put where (FK):
     # float32 rounding differs between batch sizes, and a turn the positions hardly see can
-    # drift further than the places do.
+    # drift further than the places do. Run to convergence (30 steps): frame 0 lies in a flat
+    # valley where, after 12 steps, batch and single differ by 6e-8 m² of cost but 1.2 mm of
+    # place (rounding picks other accept/refuse paths); converged, they agree to 1.6e-5 m.
     rot = _rotations(5, 3, 0.2)
     key, kept = _key(), (0, 2, 6)
-    whole = refit_kept_rotations(SKELETON, rot, kept, key)
+    whole = refit_kept_rotations(SKELETON, rot, kept, key, max_steps=30)
     single = np.concatenate(
-        [refit_kept_rotations(SKELETON, rot[f : f + 1], kept, key) for f in range(5)]
+        [refit_kept_rotations(SKELETON, rot[f : f + 1], kept, key, max_steps=30) for f in range(5)]
     )
     place = np.stack([_positions_loop(q) for q in whole])
     np.testing.assert_allclose(place, np.stack([_positions_loop(q) for q in single]), atol=2e-5)
