@@ -219,7 +219,11 @@ def run_count(
     avoid: bool = False,
     far_every: int = 1,
     dynamics_model: str = "anticipation",
+    full_detail: bool = False,
 ) -> dict[str, Any]:
+    """One plaza of ``n`` walkers; ``full_detail`` turns the LOD off: every agent in view is
+    synthesized at level 0 (one bucket holding all, thresholds out of reach, no dots), the
+    scene, step and schedule otherwise the same (paper 000's with/without-LOD comparison)."""
     side = float(np.sqrt(10.0 * n))
     text = PLAZA.format(side=side + 2, inner=side, eye_z=-side / 2 - 0.5, n=n)
     if avoid:
@@ -229,6 +233,15 @@ def run_count(
     if min_pixels is not None:  # every agent in view synthesized: no dots at all
         caps = (*sim.config.capacities[:-1], n)
         sim = replace(sim, config=replace(sim.config, min_pixels=min_pixels, capacities=caps))
+    if full_detail:
+        levels = len(sim.config.capacities)
+        cfg = replace(
+            sim.config,
+            min_pixels=0.0,
+            capacities=(n, *(1,) * (levels - 1)),
+            thresholds=(1e9,) * (levels - 1),
+        )
+        sim = replace(sim, config=cfg)
     fn = sim.compiled()
     view, dt = sim.view_at(0.0), sim.dt_array
     t = time.perf_counter()

@@ -4,10 +4,12 @@ For ``cmu/walk`` and ``cmu16`` (a second skeleton at 30 fps with turns): sample 
 shape, seconds per stage (samples, joint importance, features, DTW alignment, pose vectors, key
 levels), the storage table (bytes per key level, total, raw float32 samples, ratio; a matrix-PCA
 model at level 0's error), and per key level the mean joint position error in the root frame and
-the end-of-cycle root displacement error (m). In the same run: TensorLy ``tucker`` on the same
-tensor at level 0's ranks (time and relative error) beside our HOOI, and exact vs multiscale DTW
-at 300, 1000 and 3000 frames (``bench/dtw.py``'s sequences). Everything here is NumPy: no
-compilation, so there is no compile column. Medians of ``--repeats`` for HOOI and TensorLy.
+the end-of-cycle root displacement error (m), for the default fit and for ``level_fit="freeze"``
+(issue 21's before/after table of the per-level refit). In the same run: TensorLy ``tucker``
+on the same tensor at level 0's ranks (time and relative error) beside our HOOI, and exact vs
+multiscale DTW at 300, 1000 and 3000 frames (``bench/dtw.py``'s sequences). Everything here is
+NumPy, no compilation but the level refit's (inside its column). Medians of ``--repeats`` for
+HOOI and TensorLy.
 
     python bench/tensor.py [--json] [--repeats 3] [--no-record]
 
@@ -86,9 +88,14 @@ def bench_dataset(folder: Path, repeats: int) -> dict[str, Any]:
     stages = _stages(folder)
     clips = load_dataset(folder)
     t0 = time.perf_counter()
+    frozen = build_tensor_model(clips, TensorModelConfig(level_fit="freeze"))
+    freeze_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
     model = build_tensor_model(clips)
     build_s = time.perf_counter() - t0
-    stages["key_levels_s"] = build_s - sum(stages.values())
+    stages["key_levels_s"] = freeze_s - sum(stages.values())
+    stages["refit_s"] = build_s - freeze_s
+    before = [level_errors(frozen, i) for i in range(len(frozen.levels))]
     rep = storage(model)
     errors = [level_errors(model, i) for i in range(len(model.levels))]
     ranks = model.levels[0].tucker.ranks
@@ -124,6 +131,9 @@ def bench_dataset(folder: Path, repeats: int) -> dict[str, Any]:
         "pca_ratio": rep.pca_bytes / rep.level_bytes[0],
         "level_errors_m": [e[0] for e in errors],
         "root_errors_m": [e[1] for e in errors],
+        "freeze_level_errors_m": [e[0] for e in before],
+        "freeze_root_errors_m": [e[1] for e in before],
+        "freeze_build_seconds": freeze_s,
         "hooi_seconds": float(np.median(hooi_times)),
         "tensorly_seconds": float(np.median(tl_times)),
         "hooi_relative_error": ours_err,
@@ -170,26 +180,37 @@ def _tables(out: dict[str, Any]) -> str:
             f"### {d['folder']}: {d['samples']} samples, tensor "
             f"{'×'.join(map(str, d['tensor_shape']))}, built in {d['build_seconds']:.1f} s",
             "",
-            "| stage | samples | importance | features | DTW | pose vectors | key levels (HOOI) |",
-            "|---|---|---|---|---|---|---|",
+            "| stage | samples | importance | features | DTW | pose vectors | key levels (HOOI) "
+            "| level refit |",
+            "|---|---|---|---|---|---|---|---|",
             f"| s | {st['samples_s']:.2f} | {st['importance_s']:.2f} | {st['features_s']:.2f} | "
-            f"{st['dtw_s']:.2f} | {st['pose_vectors_s']:.2f} | {st['key_levels_s']:.2f} |",
+            f"{st['dtw_s']:.2f} | {st['pose_vectors_s']:.2f} | {st['key_levels_s']:.2f} | "
+            f"{st['refit_s']:.2f} |",
             "",
-            "| key level | ranks | joints | bytes | mean joint error (cm) | root error (cm) |",
+            "Whole-body joint error (every joint of the full skeleton, dropped ones placed by the "
+            "level's FK, root frame) and end-of-cycle root error, before (`level_fit=freeze`: mean "
+            "references, kept joints as captured) and after (default: 003 key posture, kept "
+            "joints refitted):",
+            "",
+            "| key level | ranks | joints | bytes | joint error before → after (cm) "
+            "| root error before → after (cm) |",
             "|---|---|---|---|---|---|",
         ]
-        for i, (r, j, b, e, re) in enumerate(
+        for i, (r, j, b, e0, e, r0, re) in enumerate(
             zip(
                 d["level_ranks"],
                 d["level_joints"],
                 d["level_bytes"],
+                d["freeze_level_errors_m"],
                 d["level_errors_m"],
+                d["freeze_root_errors_m"],
                 d["root_errors_m"],
                 strict=True,
             )
         ):
             lines.append(
-                f"| {i} | {'×'.join(map(str, r))} | {j} | {b:,} | {100 * e:.2f} | {100 * re:.2f} |"
+                f"| {i} | {'×'.join(map(str, r))} | {j} | {b:,} | {100 * e0:.2f} → {100 * e:.2f} "
+                f"| {100 * r0:.2f} → {100 * re:.2f} |"
             )
         lines += [
             "",
@@ -219,7 +240,7 @@ def _record(out: dict[str, Any], text: str) -> None:
 
     append_result(
         "tensor",
-        f"{out['machine']}, numpy {out['numpy']}, jax {jax.__version__} (unused), "
+        f"{out['machine']}, numpy {out['numpy']}, jax {jax.__version__} (the level refit), "
         f"OpenBLAS threads {out['blas_threads']}",
         text,
     )

@@ -10,6 +10,7 @@ the absence a failure so CI always runs them.
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 from typing import Any
 
@@ -60,13 +61,40 @@ def cmu16_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
-def cmu16_tensor(cmu16_dir: Path) -> Any:
-    """The default tensor fit of ``cmu16`` (about a minute: the per-level refit), built once per
-    test process and shared by the files that only read it."""
-    from jcrowd.io import load_dataset
+def cmu16_tensor(cmu16_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """The default tensor fit of ``cmu16`` (about 35 s: the per-level refit), built once per
+    test run and shared by the files that only read it.
+
+    Under pytest-xdist the first worker to ask builds it and saves it (the model file's round
+    trip is bit-identical, ``test_tensor_model``) in the run's shared temporary folder; the
+    others wait for that file and load it. If the builder fails, the waiters fail too, naming
+    the builder's error file.
+    """
+    from jcrowd.io import load_dataset, load_tensor_model, save_tensor_model
     from jcrowd.model import build_tensor_model
 
-    return build_tensor_model(load_dataset(cmu16_dir))
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+    path, lock, failed = (root / f"cmu16-tensor{x}" for x in (".jcm", ".lock", ".failed"))
+    try:
+        os.close(os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:
+        deadline = time.monotonic() + 600.0
+        while not path.exists():
+            if failed.exists():
+                pytest.fail(f"the cmu16 tensor fit failed in another worker: {failed}")
+            if time.monotonic() > deadline:
+                pytest.fail(f"waited 600 s for another worker's cmu16 tensor fit ({path})")
+            time.sleep(0.5)
+        return load_tensor_model(path)
+    try:
+        model = build_tensor_model(load_dataset(cmu16_dir))
+        save_tensor_model(path, model)
+    except BaseException as exc:
+        failed.write_text(repr(exc))
+        raise
+    return model
 
 
 def all_clip_paths() -> list[Path]:

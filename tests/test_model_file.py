@@ -13,8 +13,10 @@ from jcrowd.model import TensorModelConfig, build_tensor_model, fit_motion_model
 
 
 def test_round_trip(cmu16_dir: Path, tmp_path: Path) -> None:
-    # A small fit (3 key levels) keeps this test quick; the format does not depend on size.
-    tensor = build_tensor_model(load_dataset(cmu16_dir), TensorModelConfig(key_levels=3))
+    # A small fit (3 key levels, no per-level refit) keeps this test quick; the format does not
+    # depend on size or on how the levels were fitted.
+    config = TensorModelConfig(key_levels=3, level_fit="freeze")
+    tensor = build_tensor_model(load_dataset(cmu16_dir), config)
     model = fit_motion_model(tensor)
     path = tmp_path / "m.jcm"
     save_motion_model(path, model, extra={"note": "test"})
