@@ -52,14 +52,14 @@ def _positions(skeleton: Skeleton, rotations: jax.Array) -> jax.Array:
 
 
 def _ancestors(skeleton: Skeleton) -> np.ndarray:
-    """``(J, J)`` bool: ``[k, a]`` when joint ``a`` is a strict ancestor of joint ``k``."""
+    """``(J, J)`` bool: ``[k, a]`` when joint ``a`` is a strict ancestor of joint ``k`` (the
+    skeleton's :attr:`~Skeleton.path_matrix` with the root added and each joint itself taken
+    out)."""
     j = skeleton.num_joints
     out = np.zeros((j, j), bool)
-    for k in range(j):
-        a = skeleton.parents[k]
-        while a >= 0:
-            out[k, a] = True
-            a = skeleton.parents[a]
+    out[:, 1:] = np.asarray(skeleton.path_matrix) > 0
+    out[1:, 0] = True
+    np.fill_diagonal(out, False)
     return out
 
 
