@@ -76,10 +76,10 @@ def _refit(
     ``moving`` (the joints that turn) and ``max_steps`` are static: one trace per level, whose
     normal equations have only the moving joints' unknowns (a traced mask over every joint
     compiles once per skeleton but solves 3J unknowns per frame: measured on ``cmu16``, 30 %
-    slower in all). Each step linearises at the
-    current pose: turning a moving joint ``m`` by ``exp(ω)`` on the right turns its sub-tree
-    about its world axes ``G_m e_a``, so ``∂p_k/∂ω_{m,a} = (G_m e_a) × (p_k − p_m)`` for every
-    descendant ``k`` (0 otherwise) — the analytic Jacobian from one forward kinematics. The step
+    slower in all). Each step linearises at the current pose: turning a moving joint ``m`` by
+    ``exp(ω)`` on the right turns its sub-tree about its world axes ``G_m e_a``, so
+    ``∂p_k/∂ω_{m,a} = (G_m e_a) × (p_k − p_m)`` for every descendant ``k`` (0 otherwise) — the
+    analytic Jacobian from one forward kinematics. The step
     solves ``(JᵀJ + λ diag JᵀJ) δ = −Jᵀr`` and is taken (``q_m ← q_m ⊗ exp(δ_m)``) only if it
     lowers ‖r‖²; λ halves after a taken step and rises tenfold after a refused one
     (Marquardt 1963), so the cost never rises.
@@ -103,7 +103,8 @@ def _refit(
         jtj = jnp.einsum("fkm,fkn->fmn", jm, jm)
         g = jnp.einsum("fkm,fk->fm", jm, (pos[:, 1:] - goal).reshape(f, -1))
         damp = jnp.maximum(jnp.diagonal(jtj, axis1=1, axis2=2), 1e-9) * lam[:, None]
-        delta = jnp.linalg.solve(jtj + jax.vmap(jnp.diag)(damp), -g[..., None])[..., 0]
+        lhs = jtj + damp[:, :, None] * jnp.eye(jtj.shape[-1], dtype=jtj.dtype)
+        delta = jnp.linalg.solve(lhs, -g[..., None])[..., 0]
         turned = quat_mul(pose[:, idx], quat_from_expmap(delta.reshape(f, -1, 3)))
         trial = pose.at[:, idx].set(turned)
         new = cost(trial)
