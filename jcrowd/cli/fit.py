@@ -90,6 +90,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "variogram": {"p": float(vario.p), "theta": np.asarray(vario.theta).tolist()},
         "cv": None if cv is None else {f"{m}_m": v["joint_m"] for m, v in cv.items()},
         "cv_root": None if cv is None else {f"{m}_m": v["root_m"] for m, v in cv.items()},
+        "cv_z_rms": None if cv is None else cv["kriging"].get("z_rms"),
         "out": str(args.out),
     }
     result["seconds"] = time.perf_counter() - start

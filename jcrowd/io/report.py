@@ -39,6 +39,11 @@ def summary_text(result: dict[str, Any]) -> str:
             "leave-one-clip-out (joint / root error, cm): "
             + ", ".join(f"{k[:-2]} {100 * v:.2f} / {100 * root[k]:.2f}" for k, v in cv.items())
         )
+        if result.get("cv_z_rms") is not None:
+            lines.append(
+                f"kriging's predicted std vs its left-out error: z RMS {result['cv_z_rms']:.2f} "
+                "(1 = calibrated, < 1 cautious)"
+            )
     lines.append(f"model: {result['out']}")
     return "\n".join(lines) + "\n"
 

@@ -88,7 +88,11 @@ def _reliability_under(
     ops = system_operators(subsets, theta, p, system, rcond)
     g = query_gamma(subsets, queries, theta, p)
     b, _ = solve_weights(ops, g, drift_basis(queries, system))
-    return 1.0 - np.sum(b * g, axis=-1) / (theta[0] + theta[1])
+    # The nugget as measurement error, as universal.reliability_from_terms (float64 here).
+    sigma2 = np.sum(b * np.maximum(g - theta[0], 0.0), axis=-1)
+    if theta[1] <= 0:
+        return np.where(sigma2 > 0, 0.0, 1.0)
+    return 1.0 - sigma2 / theta[1]
 
 
 def greedy_reduction(

@@ -31,7 +31,7 @@ import numpy as np
 
 from jcrowd.errors import DataError
 from jcrowd.kriging.rbf import fit_rbf, predict_nearest, predict_rbf
-from jcrowd.kriging.universal import fit_kriging, normalise_controls, predict
+from jcrowd.kriging.universal import fit_kriging, kriging_variance, normalise_controls, predict
 from jcrowd.model.motion_model import (
     MotionModel,
     clamp_controls,
@@ -60,6 +60,14 @@ def leave_one_clip_out(
     skate: bool = False,
 ) -> dict[str, dict[str, float]]:
     """``{method: {"joint_m", "max_joint_m", "root_m"}}`` over every left-out clip (module doc).
+
+    ``kriging`` also gets ``z_rms``: each left-out sample's core-space error ‖K* − K‖_F divided
+    by the standard deviation the model predicts for it (√ of the kriging variance, which
+    includes the nugget: an unseen capture's own variation), root-mean-squared. The errors
+    are vectors, so a z-score is a norm and is never negative; reading taken for "the
+    standard deviation of the z-scores": their RMS about 0, which is 1 when the predicted
+    variance equals the expected squared error (as the standard deviation of signed scalar
+    z-scores is). Below 1 the model is over-cautious, above 1 over-confident.
 
     ``joint_m`` is the mean over left-out samples of their mean joint error, ``max_joint_m`` the
     mean of their per-sample maximum. With ``skate``, every method also gets ``skate_cm`` (foot
@@ -91,6 +99,7 @@ def leave_one_clip_out(
             for k in range(motions.shape[2])
         ]
     errors: dict[str, list[tuple[float, ...]]] = {m: [] for m in methods}
+    z_scores: list[float] = []
     for group in np.unique(tensor.groups):
         out = tensor.groups == group
         train = ~out
@@ -102,6 +111,11 @@ def leave_one_clip_out(
         if "kriging" in methods:
             km = fit_kriging(c_norm[train], cores[train], variogram, normalise=False)
             preds["kriging"] = np.asarray(predict(km, q))
+            # Calibration: the core-space error against the std the model predicts for an
+            # unseen capture there (kriging variance: signal, the capture's nugget, the mean).
+            miss = (preds["kriging"] - cores[out]).reshape(int(np.count_nonzero(out)), -1)
+            sd = np.sqrt(np.maximum(np.asarray(kriging_variance(km, q), np.float64), 1e-30))
+            z_scores.extend((np.linalg.norm(miss, axis=1) / sd).tolist())
         if "rbf" in methods:
             rm = fit_rbf(c_norm[train], cores[train])
             preds["rbf"] = np.asarray(predict_rbf(rm, q))
@@ -142,6 +156,8 @@ def leave_one_clip_out(
     result = {
         m: dict(zip(keys, np.mean(v, axis=0).tolist(), strict=False)) for m, v in errors.items()
     }
+    if z_scores:
+        result["kriging"]["z_rms"] = float(np.sqrt(np.mean(np.square(z_scores))))
     if skate:
         own = [
             100 * foot_skate(_decoded(tensor, truth[s], float(tensor.heights[s])))
