@@ -11,6 +11,8 @@
   controls, the same samples and the same fixed spherical variogram, in this process; compile
   timed apart; medians of ``--repeats``.
 - Fit time: ``jcrowd fit`` on ``cmu/walk`` (compilation included).
+- Anisotropy (issue 21): leave-one-clip-out core-space error of the isotropic fit against a
+  grid of geometric anisotropies, the drift system and RBF (:func:`anisotropy`).
 
     python bench/kriging.py [--json] [--repeats 3] [--no-record]
 """
@@ -83,6 +85,65 @@ def throughput(controls: np.ndarray, repeats: int, queries: int = 100_000) -> di
     }
 
 
+ANISOTROPY_GRID = (0.25, 0.5, 1.0, 2.0)
+"""Scales tried on the 2nd and 3rd normalised control (dz, dyaw) relative to the 1st (dx)."""
+
+
+def anisotropy(tensor: Any) -> dict[str, Any]:
+    """Does geometric anisotropy help kriging on unseen takes? (issue 21, item 3)
+
+    Level-0 cores, leave-one-clip-out, error ‖K* − K‖_F in core space (no decode: the joint
+    error follows it, and it is cheap enough for a grid). The isotropic fit is jcrowd's
+    (controls standardised, p chosen by leave-one-out, θ by Eq. 4); each anisotropic
+    candidate multiplies the standardised dz and dyaw by a scale from ``ANISOTROPY_GRID`` and
+    refits θ at the same p; RBF and the drift system run on the same folds.
+    """
+    from jcrowd.kriging import predict
+    from jcrowd.kriging.rbf import fit_rbf, predict_rbf
+    from jcrowd.kriging.universal import normalise_controls
+    from jcrowd.model.motion_model import clamp_controls, sample_cores
+    from jcrowd.model.samples import CONTROL_NAMES
+
+    lv = tensor.levels[0]
+    cores = sample_cores(lv.tucker.core, lv.tucker.factors[2])
+    idx = [CONTROL_NAMES.index(k) for k in ("dx", "dz", "dyaw")]
+    base, _, _ = normalise_controls(tensor.controls[:, idx])
+
+    def loco(c: np.ndarray, method: str, vario: Any = None, system: str = "residual") -> float:
+        errs = []
+        for g in np.unique(tensor.groups):
+            out = tensor.groups == g
+            train = ~out
+            box = np.stack([c[train].min(axis=0), c[train].max(axis=0)], axis=1)
+            q = jnp.asarray(clamp_controls(c[out], box), jnp.float32)
+            if method == "rbf":
+                pred = predict_rbf(fit_rbf(c[train], cores[train]), q)
+            else:
+                km = fit_kriging(c[train], cores[train], vario, normalise=False, system=system)
+                pred = predict(km, q)
+            miss = (np.asarray(pred, np.float64) - cores[out]).reshape(int(out.sum()), -1)
+            errs += np.linalg.norm(miss, axis=1).tolist()
+        return float(np.mean(errs))
+
+    iso = fit_kriging(base, cores, normalise=False).variogram
+    p = float(iso.p)
+    grid = {}
+    for a1 in ANISOTROPY_GRID:
+        for a2 in ANISOTROPY_GRID:
+            c = base * np.array([1.0, a1, a2])
+            vario = fit_kriging(c, cores, normalise=False, exponents=(p,)).variogram
+            grid[f"{a1},{a2}"] = loco(c, "kriging", vario)
+    best = min(grid, key=grid.__getitem__)
+    return {
+        "iso": loco(base, "kriging", iso),
+        "best": grid[best],
+        "best_scales": [1.0, *map(float, best.split(","))],
+        "drift": loco(base, "kriging", iso, "drift"),
+        "rbf": loco(base, "rbf"),
+        "grid": grid,
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", action="store_true")
@@ -91,7 +152,7 @@ def main() -> None:
     args = ap.parse_args()
     data = data_root()
     names = {m: NAMES.get(m, m) for m in ALL_CV_METHODS}
-    cv, cv_max, cv_root, skate, skate_raw = {}, {}, {}, {}, {}
+    cv, cv_max, cv_root, skate, skate_raw, aniso = {}, {}, {}, {}, {}, {}
     for name, folder in (("cmu/walk", data / "cmu" / "walk"), ("cmu16", data / "cmu16")):
         tensor = build_tensor_model(load_dataset(folder))
         res = leave_one_clip_out(tensor, methods=ALL_CV_METHODS, skate=True)
@@ -101,6 +162,7 @@ def main() -> None:
         skate[name] = {names[m]: res[m]["skate_cm"] for m in ALL_CV_METHODS}
         skate[name]["captures"] = res["captures"]["skate_cm"]
         skate_raw[name] = {names[m]: res[m]["skate_raw_cm"] for m in ALL_CV_METHODS}
+        aniso[name] = anisotropy(tensor)
         if name == "cmu16":
             tp = throughput(tensor.controls, args.repeats)
     t = time.perf_counter()
@@ -115,6 +177,7 @@ def main() -> None:
         "skate_cm": skate["cmu/walk"],
         "skate_cm_cmu16": skate["cmu16"],
         "skate_raw_cm": skate_raw,
+        "anisotropy": aniso,
         **tp,
         "fit_seconds": fit_s,
         "machine": machine(),
@@ -150,6 +213,17 @@ def _table(out: dict[str, Any]) -> str:
         for label, vals, k, last in rows:
             cells = " | ".join(f"{k * vals[c]:.2f}" for c in cols)
             lines.append(f"| {name} | {label} | {cells} | {last} |")
+    lines += [
+        "",
+        "| data | core-space LOCO error | isotropic (ours) | best anisotropic | "
+        "scales dx:dz:dyaw | drift system | RBF |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, a in out["anisotropy"].items():
+        lines.append(
+            f"| {name} | ‖K* − K‖ | {a['iso']:.3f} | {a['best']:.3f} | "
+            f"{':'.join(f'{x:g}' for x in a['best_scales'])} | {a['drift']:.3f} | {a['rbf']:.3f} |"
+        )
     lines += [
         "",
         f"kriging weights for {out['queries']:,} queries over {out['samples']} samples: ours "
