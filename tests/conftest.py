@@ -14,12 +14,22 @@ import time
 from pathlib import Path
 from typing import Any
 
-import jax
-import pytest
+ROOT = Path(__file__).resolve().parents[1]
+
+# One persistent XLA compilation cache for the test run's processes: the xdist workers and the
+# `jcrowd` subprocesses the CLI tests start (through the environment) compile the same crowd
+# step over and over, 1–4 min each on 2 cores. Only compilations of at least 0.5 s are stored.
+# The cache changes no result: an entry is keyed by the computation, the jax/XLA version and
+# the compile options, and the in-memory counts the no-recompile checks read are unaffected.
+# Kept under .pytest_cache/ (ignored by git) between local runs; JAX_COMPILATION_CACHE_DIR=""
+# switches it off.
+os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(ROOT / ".pytest_cache" / "jax"))
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.5")
+
+import jax  # noqa: E402  (after the cache settings, which jax reads on import)
+import pytest  # noqa: E402
 
 jax.config.update("jax_numpy_dtype_promotion", "strict")
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _data_root() -> Path | None:
