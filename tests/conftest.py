@@ -25,6 +25,9 @@ ROOT = Path(__file__).resolve().parents[1]
 # switches it off.
 os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(ROOT / ".pytest_cache" / "jax"))
 os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.5")
+# A size limit makes jax lock the cache's files (filelock), so that no process reads an entry
+# another is still writing; 4 GB is far above one run's ~100 MB.
+os.environ.setdefault("JAX_COMPILATION_CACHE_MAX_SIZE", str(4 << 30))
 
 import jax  # noqa: E402  (after the cache settings, which jax reads on import)
 import pytest  # noqa: E402
