@@ -140,7 +140,11 @@ def optimal_velocity(
     """Eq. (2) smoothed: ``V = v0 x / (1 + x^n)^{1/n}`` with ``x = (s − ℓ)/(v0 T)``, 0 at
     ``s ≤ ℓ`` (module docstring)."""
     v0 = jnp.maximum(speed, _TINY)
-    x = jnp.clip(gap / (v0 * params.time_gap), _TINY, 1e3)  # no 0**n: its n-gradient is NaN
+    # Nobody ahead (gap = +inf) gives x = 1e3 as the clip would, without dividing inf: the
+    # gradient of inf / (v0 T) through the clip is inf·0 = NaN in v0 and T.
+    free = gap == jnp.inf
+    x = jnp.clip(jnp.where(free, 0.0, gap) / (v0 * params.time_gap), _TINY, 1e3)
+    x = jnp.where(free, 1e3, x)  # and no 0**n above: its n-gradient is NaN
     v = speed * x / (1.0 + x**params.sharpness) ** (1.0 / params.sharpness)
     return jnp.where(gap > 0.0, v, 0.0)
 

@@ -193,6 +193,11 @@ def desired_directions(
 
     def lookup(i: tuple[Array, Array], k: tuple[Array, Array]) -> Array:
         (i0, fu), (k0, fv) = i, k
+        # Rounding can floor x + h two nodes past the block's first when it lands on a node
+        # (under jit, (x + h − origin)/cell came out 335.0 where x − h gave 333.99997): that
+        # is the block's last node, weight fu + 1 = 1 from the node before it.
+        fu = jnp.where(i0 == a + 2, fu + 1.0, fu)
+        fv = jnp.where(k0 == b + 2, fv + 1.0, fv)
         di, dk = i0 == a, k0 == b  # lower corner at the block's first row / column
 
         def node(r: int, c: int) -> Array:
@@ -208,7 +213,9 @@ def desired_directions(
 
     gx = lookup(ix[2], kz[1]) - lookup(ix[0], kz[1])
     gz = lookup(ix[1], kz[2]) - lookup(ix[1], kz[0])
-    norm = jnp.sqrt(gx * gx + gz * gz)
+    sq = gx * gx + gz * gz
+    # 0 where the field is flat, with a gradient of 0 there (sqrt's is infinite: NaN).
+    norm = jnp.where(sq > 0.0, jnp.sqrt(jnp.where(sq > 0.0, sq, 1.0)), 0.0)
     safe = jnp.maximum(norm, 1e-9)
     return jnp.where(norm[:, None] > 1e-9, -jnp.stack([gx, gz], axis=1) / safe[:, None], 0.0)
 

@@ -189,6 +189,7 @@ def cell_list(spec: GridSpec, position: Float[Array, "N 2"], alive: Bool[Array, 
 
     def in_bucket() -> tuple[Array, Array]:
         (idx,) = jnp.nonzero(left, size=bucket, fill_value=n)
+        idx = idx.astype(jnp.int32)  # nonzero gives int64 with x64 on; the marks are int32
         cell_b = jnp.where(idx < n, cell[jnp.minimum(idx, n - 1)], ncell)
         rank_b, last = rounds(jnp.ones((), jnp.int32), cell_b, idx, no_rank[:bucket], table)
         return rank.at[idx].set(rank_b, mode="drop"), last

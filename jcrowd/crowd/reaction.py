@@ -114,12 +114,12 @@ def sideways(
     closing = -(dx * wx + dz * wz)
     t = jnp.clip(closing / jnp.maximum(w2, TINY**2), 0.0, params.anticipation_time)
     px, pz = dx + wx * t, dz + wz * t  # x_i − x_j at the closest approach
-    s = jnp.sqrt(px * px + pz * pz)
+    s = _norm_xz(px, pz)
     d0x, d0z = desired[:, 0:1], desired[:, 1:2]
     rx, rz = -d0z, d0x  # the right of the desired direction (y up)
     front = jnp.maximum(0.0, -(dx * d0x + dz * d0z) * inv)  # k_ij
     # Following: a neighbour walking my way, or standing, is followed, not stepped around.
-    vj_speed = jnp.sqrt(vjx * vjx + vjz * vjz)
+    vj_speed = _norm_xz(vjx, vjz)
     # (1 − cos)/2 of the angle between v_j and e_i^0, times min(1, ‖v_j‖/_WALKING), in one.
     front = front * (vj_speed - (vjx * d0x + vjz * d0z)) / (2 * jnp.maximum(vj_speed, _WALKING))
     strength = params.anticipation_strength * jnp.exp((size - s) / params.anticipation_range)
@@ -131,7 +131,7 @@ def sideways(
 def react(tau: Array, motion: Motion, ex: Array, ez: Array) -> tuple[Array, Array]:
     """The direction relaxed from the last step's: ``u(e' + (e − e') min(1, Δt/τ))``."""
     vx, vz = motion.own[:, 0], motion.own[:, 1]
-    sp = jnp.sqrt(vx * vx + vz * vz)
+    sp = _norm_xz(vx, vz)
     moving = sp > 0.05
     px = jnp.where(moving, vx / jnp.maximum(sp, TINY), ex)
     pz = jnp.where(moving, vz / jnp.maximum(sp, TINY), ez)
@@ -148,14 +148,22 @@ def relax_velocity(
     rx = motion.own[:, 0] + (v * ex - motion.own[:, 0]) * rate
     rz = motion.own[:, 1] + (v * ez - motion.own[:, 1]) * rate
     ux, uz = unit_xz(rx, rz)
-    return ux, uz, jnp.sqrt(rx * rx + rz * rz)
+    return ux, uz, _norm_xz(rx, rz)
 
 
 def unit_xz(ex: Array, ez: Array) -> tuple[Array, Array]:
     """``(ex, ez)`` scaled to unit length, 0 where it is shorter than ``TINY``."""
-    norm = jnp.sqrt(ex * ex + ez * ez)
+    norm = _norm_xz(ex, ez)
     ok = norm > TINY
     return (
         jnp.where(ok, ex / jnp.maximum(norm, TINY), 0.0),
         jnp.where(ok, ez / jnp.maximum(norm, TINY), 0.0),
     )
+
+
+def _norm_xz(ex: Array, ez: Array) -> Array:
+    """``√(ex² + ez²)``, whose gradient at 0 is 0: ``jnp.sqrt``'s is infinite there, and times
+    a zero cotangent (an agent standing, or one that left) it is NaN in every gradient."""
+    sq = ex * ex + ez * ez
+    nonzero = sq > 0.0
+    return jnp.where(nonzero, jnp.sqrt(jnp.where(nonzero, sq, 1.0)), 0.0)

@@ -1,0 +1,457 @@
+"""Differentiable rollouts of the pedestrian dynamics and smooth surrogates of what they yield.
+
+Issue 22, item 1: a function from the dynamics' continuous parameters — the avoidance model's
+(:class:`~jcrowd.crowd.avoidance.AvoidanceParams`), every agent's desired speed, the wall and
+obstacle segments, door widths and a source's rate (:class:`RolloutParams`) — to a trajectory
+(:func:`rollout`), which ``jax.grad`` differentiates. It steps :func:`~jcrowd.crowd.dynamics.
+pedestrian_step` itself (navigation → neighbours → avoidance → Euler step → exits), so the
+rollout is the simulator's dynamics, not a copy of them; the LOD and the clips are not in it.
+
+Readings taken:
+
+- **Hard structure fixed by the forward pass.** What the step decides with integers or booleans
+  — the neighbour grid's cells and candidate lists, which neighbour or wall is the nearest ahead
+  in the corridor of Eq. (3), the wall the desire slides along, the clips, and the removal of
+  agents that reached their target (``alive``) — carries no gradient: ``jax.grad`` gives the
+  derivative of the smooth piece of the dynamics the forward run lies on. That is the true
+  derivative almost everywhere; central differences disagree only when their step straddles a
+  switch (a neighbour entering the corridor ahead, an arrival one step earlier). A soft "alive"
+  weight was the alternative: it would change the model itself (the grid stores alive agents
+  only and Eq. (3) takes a hard minimum), so the rollout would no longer be the simulator's.
+  An agent that arrived stays frozen where it arrived; put exit lines for the surrogates
+  upstream of the targets (a metre is plenty) so the removal never reaches them.
+- **Geometry.** Gradients with respect to walls (and obstacles, whose boundaries are walls too)
+  flow through the wall terms of the avoidance model: the repulsion and the slide of Eq. (4)
+  and the spacing to a wall ahead in Eq. (3). The navigation fields are not differentiable in
+  the geometry: fast marching runs on the host, once (:mod:`jcrowd.crowd.navigation`), so a
+  moved wall does not re-route anybody, and the candidate walls per cell are the host's lists
+  (:func:`every_wall` makes every wall a candidate of every cell, for geometry moved farther
+  than ``WALL_REACH_M`` from the built one). Something better, not done here: the field's
+  derivative by the adjoint of the eikonal equation (its linearisation is a transport equation
+  along the characteristics, solvable in the fast-marching order on the host, one sweep per
+  parameter direction).
+- **Door widths.** A :class:`Door` names the wall vertices on either side of an opening;
+  :func:`door_walls` moves the two sides apart symmetrically along the opening's axis so the
+  opening is the given width about its current centre (a corridor behind the door widens with
+  it when its side walls' vertices are named too).
+- **Source rate.** Agents of a source wait at their own start positions (a queue behind a gate,
+  as in the HERMES runs' entrance) and agent ``i`` of rank ``q_i`` is let go at
+  ``t_i = q_i / rate``. Its desired speed is weighted by the soft entry
+  ``e_i(t) = σ((t − t_i)/τ_e)``, ``τ_e = 0.15`` s by default: the 12–88 % rise (±2τ_e) takes
+  0.6 s, about the 0.5 s relaxation time of social-force models, and spans 18 steps at 30 /s,
+  so the time grid resolves it. Waiting agents are in the scene (they are neighbours, standing);
+  a hard "appear at t_i" would be a jump in the rate. Ranks below zero enter before the start.
+
+Limits, measured: where people press into each other — a jam before a door — the pathwise
+derivative grows exponentially with the horizon, because the collision-free speed model's
+direction ``u(e⁰ + Σ repulsion)`` turns fast where the desire and the repulsion nearly cancel.
+1,000 agents pressing into a 3 m door: ``|∂x/∂θ|`` about 10 after 100 steps, 10¹⁵ after 200
+(×1.4 per step; at that rate float32 overflows some 160 steps later). Eight agents pressing
+into a 1 m door: from 1 to 10³ in 20 steps, and central differences stop converging as ``h``
+shrinks. Softer walls (``D_w = 0.1`` m) changed neither. Where the flow stays below capacity
+the derivative grows about linearly in time (``bench/grad_memory.py``'s corridor, 600 steps)
+and equals central differences to 4 digits (``tests/test_grad_dynamics.py``'s room). For a
+jam, differentiate short horizons or quantities averaged over many runs.
+
+Memory: the steps run in a ``lax.scan`` over blocks of ``block`` steps (default ``⌈√steps⌉``),
+each block under ``jax.checkpoint`` and each step inside it too. The backward pass keeps the
+state at every block's start and, while it works through one block, at every step of it, and
+the residuals of one step at a time: ``(steps/block + block)`` states of about 30 B per agent,
+plus the trajectory itself. It costs two extra forward passes. Measured (``bench/
+grad_memory.py``, XLA's buffer assignment, float32): 600 steps at 1,000 agents need 78 MB;
+blocks alone 1.15 GB (a step's residuals are ~45 MB there), no checkpoints 25.7 GB.
+
+Surrogates (each a smooth function of the trajectory; temperatures are arguments):
+
+- :func:`soft_exit_count`: agents past an exit line by time ``T``,
+  ``C(T) = Σ_i σ(((x_i(T) − p)·n) / τ_c)``, ``p`` a point of the line and ``n`` its unit normal
+  pointing out; ``τ_c = 0.1`` m (half a body radius: an agent counts 0.02 … 0.98 within ±0.4 m
+  of the line). In ``[0, N]``.
+- :func:`mean_travel_time`: ``(1/N) Σ_i Σ_{k<K} Δt e_i(t_k) (1 − σ(((x_i(t_k) − p)·n)/τ_c))``
+  with ``K = T/Δt``: the mean time from entering to passing the line, each agent's time
+  censored at ``T`` (one not through by ``T`` counts ``T − t_i``), by the rectangle rule on the
+  steps. Equal to the mean travel time when everyone is through by ``T``.
+
+Conventions: positions ``[x, z]`` in metres, time in seconds, ``Δt`` the step. Every floating
+array is computed at the precision of ``params.speed`` (the setup's are cast to it).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import partial
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+from jcrowd.crowd.avoidance import AvoidanceParams
+from jcrowd.crowd.dynamics import Pedestrians, World, pedestrian_step
+from jcrowd.errors import JcrowdError
+
+__all__ = [
+    "COUNT_TEMPERATURE",
+    "ENTRY_TEMPERATURE",
+    "Door",
+    "RolloutParams",
+    "RolloutSetup",
+    "Trajectory",
+    "door_walls",
+    "entry_weights",
+    "every_wall",
+    "find_door",
+    "initial_params",
+    "mean_travel_time",
+    "rollout",
+    "soft_exit_count",
+]
+
+ENTRY_TEMPERATURE = 0.15
+"""``τ_e`` (s) of the soft entry ``σ((t − t_i)/τ_e)`` (module docstring)."""
+
+COUNT_TEMPERATURE = 0.1
+"""``τ_c`` (m) of the soft exit indicator ``σ(((x − p)·n)/τ_c)`` (module docstring)."""
+
+
+@dataclass(frozen=True)
+class Door:
+    """An opening between two groups of wall vertices (static topology).
+
+    Attributes:
+        left, right: ``(segment, end)`` pairs, ``end`` 0 or 1, of the vertices on either side
+            of the opening; each side moves as one. The first pair of each side spans the
+            opening.
+        axis: unit vector from the left side to the right, across the opening.
+    """
+
+    left: tuple[tuple[int, int], ...]
+    right: tuple[tuple[int, int], ...]
+    axis: tuple[float, float]
+
+
+def find_door(
+    walls: Float[np.ndarray, "S 2 2"],
+    left: Sequence[Sequence[float]],
+    right: Sequence[Sequence[float]],
+    tol: float = 1e-6,
+) -> Door:
+    """The :class:`Door` whose sides are the wall vertices at the points ``left`` and ``right``
+    (m; every endpoint within ``tol`` of one of them). The first point of each side spans the
+    opening; name more (a corridor's far corners) to move whole side walls with it.
+
+    Raises:
+        JcrowdError: a side without points, a point that is no wall vertex, or sides that
+            coincide.
+    """
+    ends = np.asarray(walls, np.float64)
+    sides = []
+    for name, points in (("left", left), ("right", right)):
+        if len(points) == 0:
+            raise JcrowdError(f"door: expected at least one {name} point, found none")
+        pairs = []
+        for pt in points:
+            near = np.linalg.norm(ends - np.asarray(pt, np.float64), axis=-1) <= tol
+            if not near.any():
+                raise JcrowdError(f"door: expected a wall vertex at {name} point {tuple(pt)}")
+            pairs += [(int(s), int(e)) for s, e in zip(*np.nonzero(near), strict=True)]
+        sides.append(tuple(pairs))
+    span = np.asarray(right[0], np.float64) - np.asarray(left[0], np.float64)
+    width = float(np.linalg.norm(span))
+    if not width > tol:
+        raise JcrowdError(f"door: expected the two sides apart, found {width} m between them")
+    return Door(sides[0], sides[1], (float(span[0] / width), float(span[1] / width)))
+
+
+def door_walls(
+    walls: Float[Array, "S 2 2"], doors: Sequence[Door], widths: Float[Array, " D"]
+) -> Float[Array, "S 2 2"]:
+    """``walls`` with door ``d`` opened to ``widths[d]`` (m) about its current centre: its left
+    side moves by ``−½(w − w_0) u`` and its right by ``+½(w − w_0) u``, ``u`` its axis and
+    ``w_0 = (b − a)·u`` the width between the first vertices ``a``, ``b`` of its sides."""
+    for d, door in enumerate(doors):
+        u = jnp.asarray(door.axis, walls.dtype)
+        (ls, le), (rs, re) = door.left[0], door.right[0]
+        shift = 0.5 * (widths[d] - (walls[rs, re] - walls[ls, le]) @ u)
+        for pairs, sign in ((door.left, -1.0), (door.right, 1.0)):
+            seg, end = (np.asarray(c, np.int32) for c in zip(*pairs, strict=True))
+            walls = walls.at[seg, end].add(sign * shift * u)
+    return walls
+
+
+def every_wall(world: World) -> World:
+    """``world`` with every wall a candidate of every cell (``(cells, S)`` ids): for walls
+    moved beyond the host's per-cell lists (``WALL_REACH_M``); costs ``S`` walls per agent."""
+    s, cells = world.walls.shape[0], world.cell_walls.shape[0]
+    ids = jnp.broadcast_to(jnp.arange(s, dtype=world.cell_walls.dtype), (cells, max(s, 1)))
+    return eqx.tree_at(lambda w: w.cell_walls, world, ids if s else jnp.zeros_like(ids))
+
+
+class RolloutParams(eqx.Module):
+    """The continuous parameters a rollout is differentiated in.
+
+    Attributes:
+        avoidance: the avoidance model's parameters.
+        speed: ``(N,)`` each agent's desired (free) speed ``v0`` (m/s).
+        walls: ``(S, 2, 2)`` wall and obstacle segments ``[[x, z], [x, z]]`` (m). A vertex
+            where two segments meet is two entries here: move both, as :func:`door_walls`
+            does (at a corner the two walls press alike and the slide picks one; moving one
+            end alone splits the corner, and the derivative there is one-sided).
+        door_width: ``(D,)`` the width (m) of each of the setup's doors.
+        rate: the source's rate (agents/s).
+    """
+
+    avoidance: AvoidanceParams
+    speed: Float[Array, " N"]
+    walls: Float[Array, "S 2 2"]
+    door_width: Float[Array, " D"]
+    rate: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+
+
+class RolloutSetup(eqx.Module):
+    """What a rollout holds fixed: the scene, the start, the source's order and the time grid.
+
+    Attributes:
+        world: the scene (:func:`~jcrowd.crowd.dynamics.build_world`); its walls are replaced
+            by ``params.walls``.
+        peds: the agents at ``t = 0``; their ``speed`` is replaced by ``params.speed``. With
+            ``velocity`` the step relaxes over the reaction time (and anticipates with
+            ``anticipate``), as in the simulator.
+        entry_rank: ``(N,)`` agent ``i`` leaves the source at ``rank_i / rate`` seconds
+            (module docstring); ``None``: everyone walks from the start.
+        steps: steps of ``dt`` seconds.
+        doors: the openings whose widths ``params.door_width`` sets.
+        entry_temperature: ``τ_e`` (s) of the soft entry.
+        checkpoint: blocks of steps under ``jax.checkpoint`` (else every step's residuals are
+            kept for the backward pass).
+        block: steps per checkpointed block; 0: ``⌈√steps⌉``.
+    """
+
+    world: World
+    peds: Pedestrians
+    entry_rank: Float[Array, " N"] | None = None
+    steps: int = eqx.field(static=True, default=100)
+    dt: float = eqx.field(static=True, default=1.0 / 30.0)
+    doors: tuple[Door, ...] = eqx.field(static=True, default=())
+    entry_temperature: float = eqx.field(static=True, default=ENTRY_TEMPERATURE)
+    checkpoint: bool = eqx.field(static=True, default=True)
+    block: int = eqx.field(static=True, default=0)
+
+    def __check_init__(self) -> None:
+        n, s = self.peds.position.shape[0], self.world.walls.shape[0]
+        if self.steps < 1 or not self.dt > 0 or not self.entry_temperature > 0:
+            raise JcrowdError(
+                f"rollout: expected steps ≥ 1, dt > 0 and entry_temperature > 0, found "
+                f"{self.steps}, {self.dt}, {self.entry_temperature}"
+            )
+        if self.block < 0:
+            raise JcrowdError(f"rollout: expected block ≥ 0 steps, found {self.block}")
+        if self.entry_rank is not None and self.entry_rank.shape != (n,):
+            raise JcrowdError(
+                f"rollout: expected entry_rank of shape ({n},), found {self.entry_rank.shape}"
+            )
+        for door in self.doors:
+            if any(not 0 <= seg < s or end not in (0, 1) for seg, end in door.left + door.right):
+                raise JcrowdError(f"rollout: door {door} names a vertex outside the {s} walls")
+
+
+class Trajectory(eqx.Module):
+    """A rollout's samples at ``t_k = k·dt``, ``k = 0 … steps`` (leading axis).
+
+    Attributes:
+        position: ``(K + 1, N, 2)`` m; an agent that left stays where it arrived.
+        alive: ``(K + 1, N)`` in the scene (not yet at its target).
+        entered: ``(K + 1, N)`` the soft entry ``e_i(t_k)`` (1 without a source).
+        overflow: the most agents the neighbour grid could not store at any step (0: none;
+            otherwise the run is not the model's — size the grid larger).
+        dt: the step (s).
+    """
+
+    position: Float[Array, "K1 N 2"]
+    alive: Bool[Array, "K1 N"]
+    entered: Float[Array, "K1 N"]
+    overflow: Int[Array, ""]
+    dt: float = eqx.field(static=True)
+
+
+def initial_params(
+    setup: RolloutSetup, avoidance: AvoidanceParams | None = None, rate: float = 1.0
+) -> RolloutParams:
+    """The parameters the setup was built with: its speeds and walls, its doors' widths as
+    built, ``avoidance`` (default: the model's defaults) and ``rate`` (agents/s)."""
+    walls = setup.world.walls
+    widths = [
+        (walls[d.right[0]] - walls[d.left[0]]) @ jnp.asarray(d.axis, walls.dtype)
+        for d in setup.doors
+    ]
+    return RolloutParams(
+        AvoidanceParams() if avoidance is None else avoidance,
+        setup.peds.speed,
+        walls,
+        jnp.stack(widths) if widths else jnp.zeros((0,), walls.dtype),
+        jnp.asarray(rate, walls.dtype),
+    )
+
+
+def entry_weights(
+    setup: RolloutSetup, rate: Float[Array, ""], times: Float[Array, " K"]
+) -> Float[Array, "K N"]:
+    """The soft entry ``e_i(t) = σ((t − rank_i/rate)/τ_e)`` at each time (1 without a
+    source)."""
+    n = setup.peds.position.shape[0]
+    if setup.entry_rank is None:
+        return jnp.ones((times.shape[0], n), times.dtype)
+    t_in = setup.entry_rank.astype(times.dtype) / rate
+    return jax.nn.sigmoid((times[:, None] - t_in[None, :]) / setup.entry_temperature)
+
+
+def _cast(tree: Any, dtype: Any) -> Any:
+    """``tree`` with its floating arrays cast to ``dtype``."""
+
+    def one(x: Any) -> Any:
+        if eqx.is_array(x) and jnp.issubdtype(x.dtype, jnp.floating):
+            return x.astype(dtype)
+        return x
+
+    return jax.tree.map(one, tree)
+
+
+def _scan(step: Callable, carry: Any, xs: Array, setup: RolloutSetup) -> tuple[Any, Any]:
+    """``lax.scan(step, carry, xs)``, under two levels of ``jax.checkpoint`` when the setup
+    asks: blocks of ``block`` steps, and each step inside a block. The last block is padded
+    with steps that leave the carry as it is, so one block is compiled."""
+    if not setup.checkpoint:
+        return jax.lax.scan(step, carry, xs)
+    block = min(setup.block or math.ceil(math.sqrt(setup.steps)), setup.steps)
+    blocks = -(-setup.steps // block)
+    pad = blocks * block - setup.steps
+    weights = jnp.concatenate([xs, jnp.zeros((pad, *xs.shape[1:]), xs.dtype)])
+    valid = jnp.arange(blocks * block) < setup.steps
+
+    @partial(jax.checkpoint, prevent_cse=False)
+    def each(carry: Any, x: tuple[Array, Array]) -> tuple[Any, Any]:
+        weight, ok = x
+        new, out = step(carry, weight)
+        return jax.tree.map(lambda a, b: jnp.where(ok, a, b), new, carry), out
+
+    @jax.checkpoint
+    def run_block(carry: Any, xb: tuple[Array, Array]) -> tuple[Any, Any]:
+        return jax.lax.scan(each, carry, xb)
+
+    shape = (blocks, block)
+    carry, ys = jax.lax.scan(
+        run_block, carry, (weights.reshape(*shape, *xs.shape[1:]), valid.reshape(shape))
+    )
+    return carry, jax.tree.map(lambda a: a.reshape(-1, *a.shape[2:])[: setup.steps], ys)
+
+
+def rollout(params: RolloutParams, setup: RolloutSetup) -> Trajectory:
+    """Step the setup's agents ``setup.steps`` times with the dynamics of
+    :func:`~jcrowd.crowd.dynamics.pedestrian_step` under ``params``; differentiable in
+    ``params`` (module docstring: what carries no gradient, what the memory is).
+
+    Not compiled here: ``jax.jit`` (or ``eqx.filter_jit``) the loss around it.
+
+    Raises:
+        JcrowdError: parameters whose shapes do not fit the setup (agents, walls, doors).
+    """
+    n, s = setup.peds.position.shape[0], setup.world.walls.shape[0]
+    want = {"speed": (n,), "walls": (s, 2, 2), "door_width": (len(setup.doors),), "rate": ()}
+    for name, shape in want.items():
+        found = getattr(params, name).shape
+        if found != shape:
+            raise JcrowdError(f"rollout: expected params.{name} of shape {shape}, found {found}")
+    dtype = params.speed.dtype
+    params, setup = _cast((params, setup), dtype)
+    rate = eqx.error_if(params.rate, params.rate <= 0, "rollout: expected a positive rate")
+    world = eqx.tree_at(
+        lambda w: w.walls, setup.world, door_walls(params.walls, setup.doors, params.door_width)
+    )
+    times = jnp.arange(setup.steps + 1, dtype=dtype) * setup.dt
+    entered = entry_weights(setup, rate, times)
+    peds = setup.peds
+
+    def step(
+        carry: tuple[Pedestrians, Array], weight: Array
+    ) -> tuple[tuple[Pedestrians, Array], tuple[Array, Array]]:
+        peds, overflow = carry
+        walking = eqx.tree_at(lambda p: p.speed, peds, params.speed * weight)
+        moved, info = pedestrian_step(params.avoidance, world, walking, setup.dt)
+        moved = eqx.tree_at(lambda p: p.speed, moved, peds.speed)
+        return (moved, jnp.maximum(overflow, info.overflow)), (moved.position, moved.alive)
+
+    (_, overflow), (position, alive) = _scan(
+        step, (peds, jnp.zeros((), jnp.int32)), entered[:-1], setup
+    )
+    return Trajectory(
+        jnp.concatenate([peds.position[None], position]),
+        jnp.concatenate([peds.alive[None], alive]),
+        entered,
+        overflow,
+        setup.dt,
+    )
+
+
+def _past_line(
+    position: Float[Array, "*k N 2"],
+    point: Sequence[float] | Array,
+    normal: Sequence[float] | Array,
+    temperature: float,
+) -> Float[Array, "*k N"]:
+    """The soft indicator ``σ(((x − p)·n)/τ_c)`` of being past the line (``n`` normalised)."""
+    p = jnp.asarray(point, position.dtype)
+    n = jnp.asarray(normal, position.dtype)
+    n = n / jnp.sqrt(jnp.sum(n * n))
+    return jax.nn.sigmoid(((position - p) @ n) / temperature)
+
+
+def _index(traj: Trajectory, time: float | None) -> int:
+    last = traj.position.shape[0] - 1
+    if time is None:
+        return last
+    k = round(time / traj.dt)
+    if not 0 <= k <= last:
+        raise JcrowdError(f"surrogate: expected a time in [0, {last * traj.dt:g}] s, found {time}")
+    return k
+
+
+def soft_exit_count(
+    traj: Trajectory,
+    point: Sequence[float] | Array,
+    normal: Sequence[float] | Array,
+    time: float | None = None,
+    temperature: float = COUNT_TEMPERATURE,
+) -> Float[Array, ""]:
+    """Agents through the exit line by ``time`` (s, rounded to a step; default the last):
+    ``Σ_i σ(((x_i(T) − p)·n)/τ_c)``, ``p`` a point of the line, ``n`` its normal pointing out
+    (any length), ``τ_c`` the ``temperature`` (m). In ``[0, N]``.
+
+    Raises:
+        JcrowdError: a time outside the trajectory.
+    """
+    k = _index(traj, time)
+    return jnp.sum(_past_line(traj.position[k], point, normal, temperature))
+
+
+def mean_travel_time(
+    traj: Trajectory,
+    point: Sequence[float] | Array,
+    normal: Sequence[float] | Array,
+    time: float | None = None,
+    temperature: float = COUNT_TEMPERATURE,
+) -> Float[Array, ""]:
+    """Mean time (s) from entering to passing the exit line, censored at ``time`` (default
+    the trajectory's end): ``(1/N) Σ_i Σ_{k<K} Δt e_i(t_k) (1 − σ(((x_i(t_k) − p)·n)/τ_c))``
+    (module docstring).
+
+    Raises:
+        JcrowdError: a time outside the trajectory.
+    """
+    k = _index(traj, time)
+    inside = 1.0 - _past_line(traj.position[:k], point, normal, temperature)
+    n = traj.position.shape[1]
+    return traj.dt * jnp.sum(traj.entered[:k] * inside) / n
