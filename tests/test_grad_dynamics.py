@@ -168,12 +168,9 @@ def _check(analytic: float, numeric: float, what: str) -> None:
 # ------------------------------------------------------------------------- gradients
 
 
-@pytest.mark.slow
-def test_gradient_matches_central_differences_for_avoidance_params(x64: None) -> None:
-    setup = _setup()
-    params = _params(setup)
-    _, grad = _value_and_grad(params, setup)
-    for name in PLAIN_FIELDS:
+def _check_avoidance_fields(params, setup, grad, names) -> None:
+    """Each named avoidance parameter's gradient against central differences (step 1e-6·|value|)."""
+    for name in names:
         value = float(getattr(params.avoidance, name))
         num = _central(
             params,
@@ -183,6 +180,14 @@ def test_gradient_matches_central_differences_for_avoidance_params(x64: None) ->
             1e-6 * abs(value),
         )
         _check(float(getattr(grad.avoidance, name)), num, name)
+
+
+@pytest.mark.slow
+def test_gradient_matches_central_differences_for_avoidance_params(x64: None) -> None:
+    setup = _setup()
+    params = _params(setup)
+    _, grad = _value_and_grad(params, setup)
+    _check_avoidance_fields(params, setup, grad, PLAIN_FIELDS)
     for name in ("anticipation_time", "anticipation_strength", "reaction_time", "keep_right"):
         assert float(getattr(grad.avoidance, name)) == 0.0, name  # not read by the plain model
 
@@ -277,16 +282,12 @@ def test_anticipation_model_gradient_matches_central_differences(x64: None) -> N
     setup = _setup(anticipate=True)
     params = _params(setup)
     _, grad = _value_and_grad(params, setup)
-    for name in ("anticipation_strength", "anticipation_range", "reaction_time", "strength"):
-        value = float(getattr(params.avoidance, name))
-        num = _central(
-            params,
-            setup,
-            lambda p, name=name: getattr(p.avoidance, name),
-            jnp.ones((), jnp.float64),
-            1e-6 * abs(value),
-        )
-        _check(float(getattr(grad.avoidance, name)), num, name)
+    _check_avoidance_fields(
+        params,
+        setup,
+        grad,
+        ("anticipation_strength", "anticipation_range", "reaction_time", "strength"),
+    )
     num = _central(params, setup, lambda p: p.rate, jnp.ones(()), 1e-6 * RATE)
     _check(float(grad.rate), num, "rate")
 
