@@ -14,6 +14,7 @@ from jcrowd.model.evaluate import leave_one_clip_out as leave_one_clip_out
 from jcrowd.model.footprints import FootprintControls as FootprintControls
 from jcrowd.model.footprints import controls_for_footprints as controls_for_footprints
 from jcrowd.model.footprints import cycle_footprints as cycle_footprints
+from jcrowd.model.footprints import footprint_errors as footprint_errors
 from jcrowd.model.footprints import footprints_for_controls as footprints_for_controls
 from jcrowd.model.footprints import forward_rule_controls as forward_rule_controls
 from jcrowd.model.motion_model import METHODS as METHODS

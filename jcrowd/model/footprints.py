@@ -70,7 +70,7 @@ from jaxtyping import Array, Float
 
 from jcrowd.errors import KrigingError, MotionError
 from jcrowd.kriging.universal import kriging_weights, predict_from_weights
-from jcrowd.model.motion_model import MotionModel, level_pose_vectors
+from jcrowd.model.motion_model import MotionModel, level_pose_vectors, synthesize_clip
 from jcrowd.model.posevec import decode_clip
 from jcrowd.motion.clip import Motion, joint_positions, normalize_root
 from jcrowd.motion.gait import find_feet, foot_contacts
@@ -81,6 +81,7 @@ __all__ = [
     "FootprintControls",
     "controls_for_footprints",
     "cycle_footprints",
+    "footprint_errors",
     "footprints_for_controls",
     "forward_rule_controls",
 ]
@@ -425,6 +426,38 @@ def controls_for_footprints(
 @eqx.filter_jit
 def _relative_batch(cyc: _Cycle, controls: Array) -> Array:
     return jax.vmap(lambda c: _relative(_synthesized(cyc, c)[0]))(controls)
+
+
+def footprint_errors(
+    model: MotionModel,
+    controls: np.ndarray,
+    footprints: np.ndarray,
+    level: int = 0,
+    *,
+    height: float | None = None,
+) -> np.ndarray:
+    """Planted-foot error (m) per cycle of the *delivered* clips at ``controls`` ``(N, d)``.
+
+    Each cycle is synthesized as the user gets it (:func:`synthesize_clip`: decode, unwarp to
+    the model clock, no foot locking) and its footprints are read the way a capture's are
+    (:func:`cycle_footprints`: contact detection, ankle at each heel strike); the error is the
+    mean distance of its right and closing left footprints from the asked start-frame
+    ``footprints`` ``(N, 3, 2)``, both relative to their opening left footprint. Independent of
+    the solver's fixed aligned frames and interpolation.
+    """
+    fp = _check_footprints(footprints)
+    c = np.asarray(controls, np.float64)
+    if c.shape != (len(fp), len(model.control_names)):
+        raise KrigingError(
+            f"footprint errors: expected controls of shape ({len(fp)}, "
+            f"{len(model.control_names)}) for {len(fp)} cycles, found {c.shape}"
+        )
+    out = []
+    for row, want in zip(c, fp, strict=True):
+        got, _ = cycle_footprints(synthesize_clip(model, row.tolist(), level, height=height))
+        miss = (got[1:] - got[:1]) - (want[1:] - want[:1])
+        out.append(float(np.linalg.norm(miss, axis=-1).mean()))
+    return np.array(out)
 
 
 def _errors(cyc: _Cycle, controls: np.ndarray, local: np.ndarray) -> np.ndarray:
