@@ -28,6 +28,7 @@ def _build_parser() -> tuple[argparse.ArgumentParser, dict[str, Handler]]:
     from jcrowd.cli import export as export_cmd
     from jcrowd.cli import fit as fit_cmd
     from jcrowd.cli import inspect as inspect_cmd
+    from jcrowd.cli import optimize as optimize_cmd
     from jcrowd.cli import render as render_cmd
     from jcrowd.cli import run as run_cmd
     from jcrowd.cli import simplify as simplify_cmd
@@ -48,6 +49,7 @@ def _build_parser() -> tuple[argparse.ArgumentParser, dict[str, Handler]]:
         render_cmd,
         export_cmd,
         demo_cmd,
+        optimize_cmd,
     ):
         p = module.add_parser(sub)
         p.add_argument("--json", action="store_true", help="print one JSON object on stdout")

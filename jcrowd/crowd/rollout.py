@@ -229,6 +229,12 @@ class RolloutSetup(eqx.Module):
         checkpoint: blocks of steps under ``jax.checkpoint`` (else every step's residuals are
             kept for the backward pass).
         block: steps per checkpointed block; 0: ``⌈√steps⌉``.
+        adjoint_decay: ``γ`` in ``(0, 1]``: the backward pass multiplies the cotangent of the
+            positions and velocities by ``γ`` at every step, so a parameter's effect through
+            ``k`` steps of the dynamics counts ``γ^k`` (truncated backpropagation through
+            time; the forward pass is unchanged). 1: the exact gradient. Below 1 for jams,
+            where the exact one grows about ×1.4 per step ("Limits"): a biased, bounded
+            gradient (:mod:`jcrowd.crowd.layout_opt` measures what it is worth).
     """
 
     world: World
@@ -240,8 +246,13 @@ class RolloutSetup(eqx.Module):
     entry_temperature: float = eqx.field(static=True, default=ENTRY_TEMPERATURE)
     checkpoint: bool = eqx.field(static=True, default=True)
     block: int = eqx.field(static=True, default=0)
+    adjoint_decay: float = eqx.field(static=True, default=1.0)
 
     def __check_init__(self) -> None:
+        if not 0.0 < self.adjoint_decay <= 1.0:
+            raise JcrowdError(
+                f"rollout: expected adjoint_decay in (0, 1], found {self.adjoint_decay}"
+            )
         n, s = self.peds.position.shape[0], self.world.walls.shape[0]
         if self.steps < 1 or not self.dt > 0 or not self.entry_temperature > 0:
             raise JcrowdError(
@@ -349,6 +360,23 @@ def _scan(step: Callable, carry: Any, xs: Array, setup: RolloutSetup) -> tuple[A
     return carry, jax.tree.map(lambda a: a.reshape(-1, *a.shape[2:])[: setup.steps], ys)
 
 
+@partial(jax.custom_vjp, nondiff_argnums=(1,))
+def _fade(x: Any, decay: float) -> Any:
+    """``x`` forward; its cotangent times ``decay`` backward (``RolloutSetup.adjoint_decay``)."""
+    return x
+
+
+def _fade_fwd(x: Any, decay: float) -> tuple[Any, None]:
+    return x, None
+
+
+def _fade_bwd(decay: float, _: None, g: Any) -> tuple[Any]:
+    return (jax.tree.map(lambda a: a * decay, g),)
+
+
+_fade.defvjp(_fade_fwd, _fade_bwd)
+
+
 def rollout(params: RolloutParams, setup: RolloutSetup) -> Trajectory:
     """Step the setup's agents ``setup.steps`` times with the dynamics of
     :func:`~jcrowd.crowd.dynamics.pedestrian_step` under ``params``; differentiable in
@@ -379,6 +407,11 @@ def rollout(params: RolloutParams, setup: RolloutSetup) -> Trajectory:
         carry: tuple[Pedestrians, Array], weight: Array
     ) -> tuple[tuple[Pedestrians, Array], tuple[Array, Array]]:
         peds, overflow = carry
+        if setup.adjoint_decay != 1.0:
+            decay = setup.adjoint_decay
+            peds = eqx.tree_at(lambda p: p.position, peds, _fade(peds.position, decay))
+            if peds.velocity is not None:
+                peds = eqx.tree_at(lambda p: p.velocity, peds, _fade(peds.velocity, decay))
         walking = eqx.tree_at(lambda p: p.speed, peds, params.speed * weight)
         moved, info = pedestrian_step(params.avoidance, world, walking, setup.dt)
         moved = eqx.tree_at(lambda p: p.speed, moved, peds.speed)

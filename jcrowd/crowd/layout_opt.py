@@ -1,0 +1,660 @@
+"""Layout optimisation: move obstacles so a scenario's room empties fastest (issue 22, item 3).
+
+A scenario's geometry is parametrised by the numbers at a few TOML key paths of its
+``[[obstacles]]`` (``obstacles[2].center[0]``: the x of the third obstacle's centre; also
+``size[k]``, ``radius``, ``points[j][k]``), each within bounds. :func:`layout_problem` fixes
+everything else (the agents as spawned from the scenario as written, the time grid, the
+avoidance model), :func:`layout_setup` builds the world at one parameter vector ``θ`` on the
+host, :func:`layout_objective` runs the rollout (:func:`~jcrowd.crowd.rollout.rollout`) and reads
+the objective, and :func:`projected_gradient` minimises it within the bounds.
+
+Readings taken:
+
+- **The navigation field is rebuilt at every outer iterate and frozen inside the gradient.**
+  Fast marching runs on the host (:mod:`jcrowd.crowd.navigation`), so ``θ`` changes the free
+  space, the fields and the per-cell wall lists between iterates, and ``jax.grad`` gives the
+  derivative with the field held at the current iterate: through the walls' repulsion, the slide
+  along them and the spacing ahead (:mod:`jcrowd.crowd.rollout`, "Geometry"), not through people
+  re-routing. The forward objective that a grid search evaluates, :func:`forward_value`,
+  rebuilds the field at each ``θ`` too; it is what the optimiser's line search compares, so an
+  accepted step lowers the true objective even where the frozen-field gradient is off. The
+  field is rasterised at 0.2 m cells: as ``θ`` moves, the field changes in small jumps when an
+  obstacle's edge crosses a cell centre, so the forward objective is piecewise smooth with
+  small steps (measured in ``bench/optimize.py``).
+- **Obstacle walls as functions of ``θ``.** The walls the rollout reads are the free space's
+  boundary *without* the varied obstacles (built once) plus each varied obstacle's own outline
+  (a rectangle's 4 sides, a circle's 64-gon as :func:`~jcrowd.scenario.layout.region_shape`
+  draws it, a polygon's edges), computed in JAX from ``θ`` so ``jax.grad`` reaches them. Where
+  a varied obstacle overlaps another, both outlines stay walls (nobody can stand inside them).
+  The per-cell wall lists are padded to a power of two so moving an obstacle seldom recompiles.
+- **Agents.** Spawned once from the scenario as written (its seed); every ``θ`` starts from the
+  same crowd, so differences between layouts are not differences between draws. An agent
+  inside a varied obstacle at some ``θ`` is an error naming the key to bound tighter. Only
+  groups with a ``goal`` (walk there and leave) and no ``[[sources]]``.
+- **Objectives** (each minimised; each agent's "out" is the soft indicator
+  ``o_i(t) = σ((d − D_i(x_i(t)))/τ_c)`` of being within ``d`` = ``depth`` (1 m) of its goal by
+  walking distance ``D_i``, its goal's field, with ``τ_c`` = 0.1 m as the rollout's counts;
+  agents are removed on reaching the goal, 1 m downstream of where they count as out):
+
+  - ``travel_time``: the mean censored exit time ``(1/N) Σ_i T_i``,
+    ``T_i = Σ_{k<K} Δt (1 − o_i(t_k))`` (s), as :func:`~jcrowd.crowd.rollout.mean_travel_time`
+    with the line replaced by the field.
+  - ``evacuation``: time to empty, the soft maximum ``τ_E log((1/N) Σ_i exp(T_i/τ_E))`` of the
+    ``T_i`` with ``τ_E`` = 1 s: within ``τ_E log N`` below the last exit time, and smooth where
+    the last agent changes.
+  - ``flow``: minus the mean outflow ``(1/T) Σ_i o_i(T)`` (agents/s; reported positive).
+
+- **The jam limit** (:mod:`jcrowd.crowd.rollout`, "Limits"): where people press into a door the
+  pathwise derivative grows about ×1.4 per step, so the gradient of one long, dense evacuation
+  is noise. What keeps it usable here (``examples/two_exits.toml``): few agents (tens), spread
+  over the room so the queues at the doors stay short, and objectives that average over every
+  agent and every step (the travel time). Measured in ``bench/optimize.py``: the gradient at the
+  grid's points against the slope of the forward objective between them.
+- **Optimiser**: :func:`projected_gradient`, steepest descent projected on the box with an
+  Armijo backtracking line search on the forward objective and Barzilai–Borwein step lengths,
+  in coordinates scaled to the unit box. Chosen over optimistix's minimisers because the world
+  is rebuilt on the host between iterates (a host loop, not one compiled solve) and the box is
+  the only constraint; a Python loop over a few compiled gradients costs nothing extra.
+
+Conventions: positions ``[x, z]`` in metres, time in seconds; ``θ`` in the key paths' units.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import shapely
+from jaxtyping import Array, Float
+
+from jcrowd.crowd.avoidance import AvoidanceParams
+from jcrowd.crowd.dynamics import Pedestrians, World, wall_segments, walls_near_cells
+from jcrowd.crowd.navigation import Navigation, distance_field, field_grid, field_values, rasterize
+from jcrowd.crowd.neighbours import grid_spec
+from jcrowd.crowd.rollout import COUNT_TEMPERATURE, RolloutParams, RolloutSetup, rollout
+from jcrowd.crowd.scene import CLEARANCE_M, NAV_CELL_M
+from jcrowd.errors import JcrowdError, ScenarioError
+from jcrowd.scenario.check import Problem
+from jcrowd.scenario.geometry import Region
+from jcrowd.scenario.layout import Layout, free_space, region_shape
+from jcrowd.scenario.schema import Scenario
+from jcrowd.scenario.spawning import spawn
+
+__all__ = [
+    "EMPTY_TEMPERATURE",
+    "OBJECTIVES",
+    "OUT_DEPTH",
+    "LayoutProblem",
+    "OptimizeResult",
+    "Varied",
+    "forward_value",
+    "layout_objective",
+    "layout_problem",
+    "layout_setup",
+    "obstacle_walls",
+    "parse_key_path",
+    "projected_gradient",
+    "value_and_gradient",
+    "varied_parameter",
+    "with_values",
+]
+
+OBJECTIVES = ("evacuation", "flow", "travel_time")
+"""The objectives :func:`layout_objective` reads (module docstring)."""
+
+EMPTY_TEMPERATURE = 1.0
+"""``τ_E`` (s) of the soft time to empty."""
+
+OUT_DEPTH = 1.0
+"""``d`` (m): an agent within this walking distance of its goal counts as out."""
+
+_CIRCLE_SIDES = 64  # region_shape draws a circle as a 64-gon (quad_segs=16)
+_GRID_CELL_M = 1.6  # the simulator's neighbour grid cell (jcrowd.crowd.simulate)
+_GRID_DENSITY = 8.0  # agents per m² a cell holds (× 1.5): queues at a door are dense
+_FIELDS = {"rect": ("center", "size"), "circle": ("center", "radius"), "polygon": ("points",)}
+
+
+# ------------------------------------------------------------------------------ key paths
+
+
+def parse_key_path(key: str) -> tuple[str | int, ...]:
+    """``"obstacles[1].center[0]"`` → ``("obstacles", 1, "center", 0)``.
+
+    Raises:
+        JcrowdError: text that is not names joined by dots, each with optional ``[index]``es.
+    """
+    parts: list[str | int] = []
+    for name in key.split("."):
+        m = re.fullmatch(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[\d+\])*)", name)
+        if m is None:
+            raise JcrowdError(
+                f"key path {key!r}: expected names joined by dots, each with optional [index]es "
+                f"(e.g. obstacles[1].center[0]), found {name!r}"
+            )
+        parts.append(m.group(1))
+        parts += [int(i) for i in re.findall(r"\[(\d+)\]", m.group(2))]
+    return tuple(parts)
+
+
+@dataclass(frozen=True)
+class Varied:
+    """One varied number: ``key`` (its TOML key path), the obstacle it belongs to, the field
+    (``center``, ``size``, ``radius``, ``points``) and the index inside it, and its bounds."""
+
+    key: str
+    obstacle: int
+    field: str
+    index: tuple[int, ...]
+    lower: float
+    upper: float
+
+
+def _default_bounds(field: str, value: float) -> tuple[float, float]:
+    if field in ("size", "radius"):
+        return 0.5 * value, 1.5 * value
+    return value - 1.0, value + 1.0
+
+
+def varied_parameter(
+    scenario: Scenario, key: str, bounds: tuple[float, float] | None = None
+) -> Varied:
+    """The :class:`Varied` number at ``key`` with ``bounds`` (default: ±1 m for coordinates,
+    ×0.5 … ×1.5 for sizes and radii).
+
+    Raises:
+        JcrowdError: a key that is not a number of an ``[[obstacles]]`` table of the scenario,
+            or bounds that do not hold its current value.
+    """
+    path = parse_key_path(key)
+    head = f"{scenario.source}: {key}"
+    obstacles = scenario.layout.obstacles
+    if len(path) < 3 or path[0] != "obstacles" or not isinstance(path[1], int):
+        raise JcrowdError(
+            f"{head}: expected a key of an [[obstacles]] table (e.g. obstacles[0].center[0]), "
+            f"found {key!r}"
+        )
+    i, field, index = path[1], path[2], path[3:]
+    if i >= len(obstacles):
+        raise JcrowdError(f"{head}: expected an obstacle index below {len(obstacles)}, found {i}")
+    region = obstacles[i]
+    if field not in _FIELDS[region.kind]:
+        allowed = ", ".join(_FIELDS[region.kind])
+        raise JcrowdError(
+            f"{head}: expected one of {allowed} (a {region.kind}'s numbers), found {field!r}"
+        )
+    value = np.asarray(getattr(region, str(field)), np.float64)
+    if any(not isinstance(k, int) for k in index) or len(index) != value.ndim:
+        raise JcrowdError(
+            f"{head}: expected a number ({value.ndim} index(es) into {field}), found "
+            f"{'an array' if len(index) < value.ndim else 'too many indexes'}"
+        )
+    ints = tuple(int(k) for k in index)
+    if any(k >= n for k, n in zip(ints, value.shape, strict=True)):
+        raise JcrowdError(f"{head}: expected indexes within {list(value.shape)}, found {ints}")
+    current = float(value[ints])
+    lo, hi = bounds if bounds is not None else _default_bounds(str(field), current)
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise JcrowdError(f"{head}: expected bounds lo < hi, found [{lo}, {hi}]")
+    if not lo <= current <= hi:
+        raise JcrowdError(
+            f"{head}: expected bounds holding its value {current:g}, found [{lo}, {hi}]"
+        )
+    return Varied(key, i, str(field), ints, float(lo), float(hi))
+
+
+def with_values(
+    scenario: Scenario, varied: Sequence[Varied], theta: Sequence[float] | np.ndarray
+) -> Scenario:
+    """The scenario with each varied number set to ``theta`` (checked as a parsed one is).
+
+    Raises:
+        ScenarioError: the new layout is invalid (an obstacle covering a goal, a degenerate
+            polygon, …), naming the key.
+    """
+    obstacles = list(scenario.layout.obstacles)
+    for v, value in zip(varied, theta, strict=True):
+        region = obstacles[v.obstacle]
+        array = np.array(getattr(region, v.field), np.float64)
+        array[v.index] = float(value)
+        kw: dict[str, Any] = {f: getattr(region, f) for f in _FIELDS[region.kind]}
+        kw[v.field] = float(array) if v.field == "radius" else array
+        try:
+            obstacles[v.obstacle] = Region(region.kind, **kw)
+        except Problem as p:
+            raise ScenarioError(f"{scenario.source}: {v.key}: {p.detail}") from None
+    layout = Layout(tuple(obstacles), scenario.layout.walls, scenario.layout.walkable)
+    try:
+        return dataclasses.replace(scenario, layout=layout)
+    except Problem as p:
+        raise ScenarioError(f"{scenario.source}: {p.key}: {p.detail}") from None
+
+
+# ------------------------------------------------------------------------------ geometry
+
+
+def _outline(kind: str, values: Float[Array, " P"]) -> Float[Array, "E 2 2"]:
+    """The sides ``(E, 2, 2)`` of one obstacle from its numbers, laid out as :func:`_flat`
+    lays them out."""
+    if kind == "rect":
+        c, half = values[:2], 0.5 * values[2:4]
+        lo, hi = c - half, c + half
+        corners = jnp.stack([lo, jnp.stack([hi[0], lo[1]]), hi, jnp.stack([lo[0], hi[1]])])
+    elif kind == "circle":
+        a = jnp.asarray(np.arange(_CIRCLE_SIDES) * (2 * np.pi / _CIRCLE_SIDES), values.dtype)
+        corners = values[:2] + values[2] * jnp.stack([jnp.cos(a), jnp.sin(a)], axis=1)
+    else:
+        corners = values.reshape(-1, 2)
+    return jnp.stack([corners, jnp.roll(corners, -1, axis=0)], axis=1)
+
+
+def _flat(region: Region) -> np.ndarray:
+    """An obstacle's numbers as one vector: rect ``[cx, cz, w, d]``, circle ``[cx, cz, r]``,
+    polygon its points row by row."""
+    if region.kind == "rect":
+        return np.concatenate([region.center, region.size]).astype(np.float64)
+    if region.kind == "circle":
+        return np.asarray([*region.center, region.radius], np.float64)
+    return np.asarray(region.points, np.float64).reshape(-1)
+
+
+def _slot(region: Region, v: Varied) -> int:
+    """Where ``v`` sits in :func:`_flat`'s vector."""
+    if v.field == "points":
+        return 2 * v.index[0] + v.index[1]
+    return {"center": 0, "size": 2, "radius": 2}[v.field] + (v.index[0] if v.index else 0)
+
+
+class LayoutGeometry(eqx.Module):
+    """The walls as a function of ``θ``: the fixed ones and the varied obstacles' numbers.
+
+    Attributes:
+        fixed: ``(S0, 2, 2)`` the free space's boundary without the varied obstacles.
+        base: per varied obstacle, its numbers at the scenario as written (:func:`_flat`).
+        kinds: per varied obstacle, ``"rect"``, ``"circle"`` or ``"polygon"``.
+        slots: per ``θ_j``, ``(which varied obstacle, position in its numbers)``.
+    """
+
+    fixed: Float[Array, "S0 2 2"]
+    base: tuple[Float[Array, " P"], ...]
+    kinds: tuple[str, ...] = eqx.field(static=True)
+    slots: tuple[tuple[int, int], ...] = eqx.field(static=True)
+
+
+def obstacle_walls(geometry: LayoutGeometry, theta: Float[Array, " V"]) -> Float[Array, "S 2 2"]:
+    """Every wall segment at ``θ`` (m): the fixed ones, then each varied obstacle's outline;
+    differentiable in ``θ``. The count ``S`` does not depend on ``θ``."""
+    values = [b.astype(theta.dtype) for b in geometry.base]
+    for j, (o, pos) in enumerate(geometry.slots):
+        values[o] = values[o].at[pos].set(theta[j])
+    parts = [geometry.fixed.astype(theta.dtype)]
+    parts += [_outline(k, v) for k, v in zip(geometry.kinds, values, strict=True)]
+    return jnp.concatenate(parts)
+
+
+# ------------------------------------------------------------------------------ the problem
+
+
+@dataclass(frozen=True, eq=False)
+class LayoutProblem:
+    """What stays fixed while ``θ`` moves (host side; built by :func:`layout_problem`).
+
+    Attributes:
+        scenario: the scenario as written.
+        varied: the varied numbers, in ``θ``'s order.
+        objective: one of :data:`OBJECTIVES`.
+        peds: the agents at ``t = 0`` (spawned once).
+        geometry: the walls as a function of ``θ`` (its ``fixed`` and ``base`` as built).
+        steps, dt: the time grid (the scenario's duration and fps).
+        avoidance: the avoidance model's parameters.
+        depth: ``d`` (m) of the "out" indicator.
+        adjoint_decay: ``γ`` of the rollout's truncated backpropagation (1: exact gradient;
+            :class:`~jcrowd.crowd.rollout.RolloutSetup`).
+    """
+
+    scenario: Scenario
+    varied: tuple[Varied, ...]
+    objective: str
+    peds: Pedestrians
+    geometry: LayoutGeometry
+    steps: int
+    dt: float
+    avoidance: AvoidanceParams
+    depth: float = OUT_DEPTH
+    adjoint_decay: float = 1.0
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.asarray([v.lower for v in self.varied])
+
+    @property
+    def upper(self) -> np.ndarray:
+        return np.asarray([v.upper for v in self.varied])
+
+    @property
+    def start(self) -> np.ndarray:
+        """``θ`` of the scenario as written."""
+        obstacles = self.scenario.layout.obstacles
+        return np.asarray(
+            [_flat(obstacles[v.obstacle])[_slot(obstacles[v.obstacle], v)] for v in self.varied]
+        )
+
+
+def layout_problem(
+    scenario: Scenario,
+    varied: Sequence[Varied],
+    objective: str,
+    *,
+    avoidance: AvoidanceParams | None = None,
+    steps: int | None = None,
+    depth: float = OUT_DEPTH,
+    adjoint_decay: float = 1.0,
+    dtype: Any = jnp.float32,
+) -> LayoutProblem:
+    """Fix a scenario's crowd, time grid and fixed walls for optimising ``varied``.
+
+    Raises:
+        JcrowdError: an unknown objective, no or repeated varied keys, groups with a path,
+            ``[[sources]]``, avoidance off, or ``steps`` below 1.
+    """
+    src = scenario.source
+    if objective not in OBJECTIVES:
+        raise JcrowdError(
+            f"optimize: expected an objective in {', '.join(OBJECTIVES)}, found {objective!r}"
+        )
+    keys = [v.key for v in varied]
+    if not keys or len(set(keys)) != len(keys):
+        raise JcrowdError(f"{src}: expected one or more distinct keys to vary, found {keys}")
+    bad = [f"groups[{i}]" for i, g in enumerate(scenario.groups) if g.goal is None]
+    if bad:
+        raise JcrowdError(
+            f"{src}: {bad[0]}: expected a group with a goal (the optimiser rolls "
+            "out agents walking to their goal and leaving), found a path"
+        )
+    if scenario.sources:
+        raise JcrowdError(
+            f"{src}: sources: expected no [[sources]] (the optimiser's crowd is "
+            f"the one spawned at t = 0), found {len(scenario.sources)}"
+        )
+    if not scenario.dynamics.avoid:
+        raise JcrowdError(f"{src}: dynamics.avoid: expected true, found false")
+    steps = round(scenario.duration_s * scenario.fps) if steps is None else steps
+    if steps < 1:
+        raise JcrowdError(f"optimize: expected at least one step, found {steps}")
+    sp = spawn(scenario)
+    n = sp.num_agents
+    peds = Pedestrians(
+        jnp.asarray(sp.position, dtype),
+        jnp.asarray(sp.group, jnp.int32),  # one field per group: its goal
+        jnp.asarray(sp.speed, dtype),
+        jnp.full(n, scenario.dynamics.radius, dtype),
+        jnp.ones(n, bool),
+        jnp.zeros((n, 2), dtype),
+        scenario.dynamics.model == "anticipation",
+    )
+    moved = sorted({v.obstacle for v in varied})
+    obstacles = scenario.layout.obstacles
+    kept = tuple(o for i, o in enumerate(obstacles) if i not in moved)
+    rest = Layout(kept, scenario.layout.walls, scenario.layout.walkable)
+    geometry = LayoutGeometry(
+        jnp.asarray(wall_segments(free_space(scenario.ground, rest))),
+        tuple(jnp.asarray(_flat(obstacles[i]), dtype) for i in moved),
+        tuple(obstacles[i].kind for i in moved),
+        tuple((moved.index(v.obstacle), _slot(obstacles[v.obstacle], v)) for v in varied),
+    )
+    return LayoutProblem(
+        scenario,
+        tuple(varied),
+        objective,
+        peds,
+        geometry,
+        steps,
+        1.0 / scenario.fps,
+        AvoidanceParams() if avoidance is None else avoidance,
+        depth,
+        adjoint_decay,
+    )
+
+
+class LayoutSetup(eqx.Module):
+    """One outer iterate's world (fields and wall lists at ``θ``) and what the objective reads."""
+
+    rollout: RolloutSetup
+    geometry: LayoutGeometry
+    avoidance: AvoidanceParams
+    objective: str = eqx.field(static=True)
+    depth: float = eqx.field(static=True)
+
+
+def layout_setup(problem: LayoutProblem, theta: Sequence[float] | np.ndarray) -> LayoutSetup:
+    """Build the world at ``θ`` on the host: free space, one field per group's goal, the
+    neighbour grid's wall lists (module docstring).
+
+    Raises:
+        JcrowdError: ``θ`` outside the bounds, an agent inside a varied obstacle, or a layout
+            the scenario's checks refuse.
+    """
+    theta = np.asarray(theta, np.float64)
+    src = problem.scenario.source
+    for v, x in zip(problem.varied, theta, strict=True):
+        if not v.lower - 1e-9 <= x <= v.upper + 1e-9:
+            raise JcrowdError(
+                f"{src}: {v.key}: expected a value in [{v.lower:g}, {v.upper:g}], found {x:g}"
+            )
+    scenario = with_values(problem.scenario, problem.varied, theta)
+    space = free_space(scenario.ground, scenario.layout)
+    fg = field_grid(
+        np.asarray(problem.geometry.fixed).reshape(-1, 2).min(0),
+        np.asarray(problem.geometry.fixed).reshape(-1, 2).max(0),
+        NAV_CELL_M,
+    )
+    free = rasterize(fg, space)
+    fields = []
+    for i, g in enumerate(scenario.groups):
+        try:
+            goal = rasterize(fg, region_shape(g.goal).intersection(space))  # type: ignore[arg-type]
+            fields.append(distance_field(fg, free, goal, clearance=CLEARANCE_M))
+        except JcrowdError as err:
+            raise JcrowdError(
+                f"{src}: groups[{i}].goal: {err} (at {_show(problem, theta)})"
+            ) from None
+    xz = np.asarray(problem.peds.position, np.float64)
+    for v in problem.varied:
+        shape = region_shape(scenario.layout.obstacles[v.obstacle])
+        inside = np.asarray(shapely.contains_xy(shape, xz[:, 0], xz[:, 1]))
+        if inside.any():
+            raise JcrowdError(
+                f"{src}: {v.key}: expected bounds keeping obstacles[{v.obstacle}] off the agents, "
+                f"found agent {int(np.argmax(inside))} inside it at {_show(problem, theta)}"
+            )
+    walls = np.asarray(obstacle_walls(problem.geometry, jnp.asarray(theta)), np.float32)
+    lo, hi = scenario.ground.bounds()
+    m = _GRID_CELL_M
+    spec = grid_spec((lo[0] - m, lo[1] - m), (hi[0] + m, hi[1] + m), m, max_density=_GRID_DENSITY)
+    near = walls_near_cells(spec, walls)
+    width = 1 << max(0, near.shape[1] - 1).bit_length()  # padded: fewer distinct shapes
+    near = np.pad(near, ((0, 0), (0, width - near.shape[1])), constant_values=len(walls))
+    dtype = problem.peds.speed.dtype
+    world = World(
+        Navigation(jnp.asarray(np.stack(fields), jnp.float32), fg),
+        jnp.asarray(walls, dtype),
+        jnp.asarray(near),
+        spec,
+    )
+    setup = RolloutSetup(
+        world, problem.peds, steps=problem.steps, dt=problem.dt, adjoint_decay=problem.adjoint_decay
+    )
+    return LayoutSetup(setup, problem.geometry, problem.avoidance, problem.objective, problem.depth)
+
+
+def _show(problem: LayoutProblem, theta: np.ndarray) -> str:
+    return ", ".join(f"{v.key} = {x:g}" for v, x in zip(problem.varied, theta, strict=True))
+
+
+# ------------------------------------------------------------------------------ objectives
+
+
+def layout_objective(theta: Float[Array, " V"], setup: LayoutSetup) -> tuple[Array, Array]:
+    """The objective at ``θ`` (minimised; module docstring) and the neighbour grid's overflow
+    (0: the run is the model's). Differentiable in ``θ`` with the world held at its iterate."""
+    walls = obstacle_walls(setup.geometry, theta)
+    peds = setup.rollout.peds
+    params = RolloutParams(
+        setup.avoidance,
+        peds.speed.astype(theta.dtype),
+        walls,
+        jnp.zeros((0,), theta.dtype),
+        jnp.ones((), theta.dtype),
+    )
+    traj = rollout(params, setup.rollout)
+    x = traj.position.astype(theta.dtype)
+    depth = field_values(setup.rollout.world.nav, peds.target, x[..., 0], x[..., 1])
+    out = jax.nn.sigmoid((setup.depth - depth.astype(theta.dtype)) / COUNT_TEMPERATURE)
+    dt = setup.rollout.dt
+    if setup.objective == "flow":
+        value = -jnp.sum(out[-1]) / (setup.rollout.steps * dt)
+    else:
+        exit_time = dt * jnp.sum(traj.entered[:-1] * (1.0 - out[:-1]), axis=0)  # (N,)
+        if setup.objective == "travel_time":
+            value = jnp.mean(exit_time)
+        else:
+            n = exit_time.shape[0]
+            value = EMPTY_TEMPERATURE * (
+                jax.nn.logsumexp(exit_time / EMPTY_TEMPERATURE) - math.log(n)
+            )
+    return value, traj.overflow
+
+
+_forward = jax.jit(layout_objective)
+_value_and_grad = jax.jit(jax.value_and_grad(layout_objective, has_aux=True))
+
+
+def _checked(problem: LayoutProblem, theta: np.ndarray, overflow: Any) -> None:
+    if int(overflow) > 0:
+        raise JcrowdError(
+            f"{problem.scenario.source}: expected the neighbour grid to hold the crowd, found "
+            f"{int(overflow)} agents over its capacity at {_show(problem, theta)}"
+        )
+
+
+def forward_value(problem: LayoutProblem, theta: Sequence[float] | np.ndarray) -> float:
+    """The objective at ``θ`` with the world rebuilt there: one forward simulation."""
+    x = np.asarray(theta, np.float64)
+    setup = layout_setup(problem, x)
+    value, overflow = _forward(jnp.asarray(x, problem.peds.speed.dtype), setup)
+    _checked(problem, x, overflow)
+    return float(value)
+
+
+def value_and_gradient(
+    problem: LayoutProblem, theta: Sequence[float] | np.ndarray
+) -> tuple[float, np.ndarray]:
+    """The objective and its gradient at ``θ`` (world rebuilt at ``θ``, then frozen)."""
+    x = np.asarray(theta, np.float64)
+    setup = layout_setup(problem, x)
+    (value, overflow), grad = _value_and_grad(jnp.asarray(x, problem.peds.speed.dtype), setup)
+    _checked(problem, x, overflow)
+    return float(value), np.asarray(grad, np.float64)
+
+
+# ------------------------------------------------------------------------------ the optimiser
+
+
+@dataclass(frozen=True)
+class OptimizeResult:
+    """What :func:`projected_gradient` found.
+
+    Attributes:
+        x: the best point evaluated (``θ``).
+        value: the objective there.
+        gradient: its gradient there.
+        path: every point evaluated and its value, in order.
+        evaluations: calls of the value-and-gradient function.
+        iterations: accepted steps.
+        message: why it stopped.
+    """
+
+    x: np.ndarray
+    value: float
+    gradient: np.ndarray
+    path: tuple[tuple[np.ndarray, float], ...]
+    evaluations: int
+    iterations: int
+    message: str
+
+
+def projected_gradient(
+    fun: Callable[[np.ndarray], tuple[float, np.ndarray]],
+    x0: Sequence[float] | np.ndarray,
+    lower: Sequence[float] | np.ndarray,
+    upper: Sequence[float] | np.ndarray,
+    *,
+    max_evaluations: int = 8,
+    tol: float = 1e-2,
+    first_step: float = 0.25,
+    armijo: float = 1e-4,
+    shrink: float = 0.3,
+) -> OptimizeResult:
+    """Minimise ``fun`` (``x → (value, gradient)``) over the box ``lower ≤ x ≤ upper``.
+
+    Steepest descent projected on the box, in coordinates scaled to the unit box
+    (``u = (x − lower)/(upper − lower)``): the first step moves ``first_step`` of the box along
+    the largest gradient component, later ones take the Barzilai–Borwein length
+    ``s·s / s·y`` (or double the last when ``s·y ≤ 0``). A step is kept when it lowers the
+    value by at least ``armijo`` times what the gradient promised (Armijo), else its length is
+    multiplied by ``shrink`` and the step tried again. Each try calls ``fun`` once.
+
+    Stops when the projected step is shorter than ``tol`` (in box units) or after
+    ``max_evaluations`` calls; returns the best point seen.
+
+    Raises:
+        JcrowdError: bounds with ``lower ≥ upper``, a start outside them, or a budget below 1.
+    """
+    lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
+    x = np.asarray(x0, np.float64)
+    if not (lo.shape == hi.shape == x.shape and np.all(lo < hi)):
+        raise JcrowdError(f"optimiser: expected lower < upper of one shape, found {lo} and {hi}")
+    if not np.all((lo <= x) & (x <= hi)):
+        raise JcrowdError(f"optimiser: expected a start within [{lo}, {hi}], found {x}")
+    if max_evaluations < 1:
+        raise JcrowdError(
+            f"optimiser: expected a budget of ≥ 1 evaluation, found {max_evaluations}"
+        )
+    span = hi - lo
+    u = (x - lo) / span
+    value, grad = fun(x)
+    g = np.asarray(grad, np.float64) * span  # the gradient in box units
+    path = [(x.copy(), float(value))]
+    best = (x.copy(), float(value), np.asarray(grad, np.float64))
+    evaluations, iterations, message = 1, 0, f"stopped after {max_evaluations} evaluations"
+    gmax = float(np.max(np.abs(g)))
+    alpha = first_step / gmax if gmax > 0 else 0.0
+    while evaluations < max_evaluations:
+        trial = np.clip(u - alpha * g, 0.0, 1.0)
+        s = trial - u
+        if float(np.max(np.abs(s))) < tol:
+            message = f"converged: projected step below {tol:g} of the box"
+            break
+        xt = lo + trial * span
+        vt, gt_raw = fun(xt)
+        evaluations += 1
+        path.append((xt.copy(), float(vt)))
+        if vt < best[1]:
+            best = (xt.copy(), float(vt), np.asarray(gt_raw, np.float64))
+        if vt <= value + armijo * float(g @ s):
+            gt = np.asarray(gt_raw, np.float64) * span
+            y, ss = gt - g, float(s @ s)
+            sy = float(s @ y)
+            alpha = ss / sy if sy > 0 else 2.0 * alpha
+            u, value, g = trial, float(vt), gt
+            iterations += 1
+        else:
+            alpha *= shrink
+    return OptimizeResult(best[0], best[1], best[2], tuple(path), evaluations, iterations, message)
