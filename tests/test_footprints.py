@@ -33,7 +33,12 @@ from jcrowd.model import (
     forward_rule_controls,
     level_pose_vectors,
 )
-from jcrowd.model.footprints import _cycle, _residual, _synthesized, _synthesized_jit
+from jcrowd.model.footprint_map import (
+    footprint_map,
+    residual,
+    synthesized_footprints,
+    synthesized_jit,
+)
 from jcrowd.model.posevec import decode_pose_vectors
 from jcrowd.motion.clip import joint_positions, slice_frames
 from jcrowd.motion.gait import find_feet
@@ -77,15 +82,15 @@ def test_solves_the_models_own_footprints_back_to_their_controls(model, own):
 def test_footprint_map_equals_the_numpy_decode_and_fk(model):
     """The JAX map (1) at its three aligned frames vs decode_pose_vectors + FK in NumPy."""
     h = 1.6
-    cyc = _cycle(model, 0, h)
+    fmap = footprint_map(model, 0, h)
     feet = find_feet(model.skeleton)
     for c in CONTROLS:
-        ours = np.asarray(_synthesized_jit(cyc, jnp.asarray(c, jnp.float32))[0], np.float64)
+        ours = np.asarray(synthesized_jit(fmap, jnp.asarray(c, jnp.float32))[0], np.float64)
         y = level_pose_vectors(model, c, 0)
         motion, _ = decode_pose_vectors(y, model.layout, model.skeleton.scaled(h), h, model.fps)
         pos = np.asarray(joint_positions(motion), np.float64)
         for k, ((i0, i1, w), joint) in enumerate(
-            zip(cyc.frames, (feet.left_ankle, feet.right_ankle, feet.left_ankle), strict=True)
+            zip(fmap.frames, (feet.left_ankle, feet.right_ankle, feet.left_ankle), strict=True)
         ):
             ref = (pos[i0, joint] * (1 - w) + pos[i1, joint] * w)[[0, 2]]
             # Between aligned frames we lerp exp maps, the reference lerps positions: a
@@ -96,20 +101,20 @@ def test_footprint_map_equals_the_numpy_decode_and_fk(model):
 def test_residual_jacobian_equals_central_differences(model, own):
     fp, _ = own
     with jax.enable_x64(True):
-        cyc = jax.tree_util.tree_map(
+        fmap = jax.tree_util.tree_map(
             lambda a: (
                 jnp.asarray(a, jnp.float64)
                 if hasattr(a, "dtype") and jnp.issubdtype(a.dtype, jnp.floating)
                 else a
             ),
-            _cycle(model, 0, 1.7),
+            footprint_map(model, 0, 1.7),
         )
         target = jnp.asarray(fp[1, 1:] - fp[1, :1] + 0.05, jnp.float64)  # residual not at 0
         free = jnp.ones(3, bool)
-        args = (cyc, target, jnp.zeros(3, jnp.float64), free)
-        km = cyc.kriging
-        residual = eqx.filter_jit(_residual)
-        jacobian = eqx.filter_jit(jax.jacfwd(_residual))
+        args = (fmap, target, jnp.zeros(3, jnp.float64), free)
+        km = fmap.kriging
+        value = eqx.filter_jit(residual)
+        jacobian = eqx.filter_jit(jax.jacfwd(residual))
         for c in CONTROLS[1:]:
             u = (jnp.asarray(c) - km.control_mean) / km.control_scale
             jac = np.asarray(jacobian(u, args))
@@ -117,8 +122,8 @@ def test_residual_jacobian_equals_central_differences(model, own):
             fd = np.stack(
                 [
                     (
-                        np.asarray(residual(u.at[k].add(eps), args))
-                        - np.asarray(residual(u.at[k].add(-eps), args))
+                        np.asarray(value(u.at[k].add(eps), args))
+                        - np.asarray(value(u.at[k].add(-eps), args))
                     )
                     / (2 * eps)
                     for k in range(3)
@@ -153,10 +158,10 @@ def test_world_footprints_move_rigidly_with_the_solution(model):
 @pytest.mark.slow
 def test_jit_equals_eager(model):
     # Slow (~10 s): the eager map compiles each of its few hundred primitives on first use.
-    cyc = _cycle(model, 0, model.default_height)
+    fmap = footprint_map(model, 0, model.default_height)
     c = jnp.asarray(CONTROLS[2], jnp.float32)
-    eager = np.asarray(_synthesized(cyc, c)[0])
-    jitted = np.asarray(_synthesized_jit(cyc, c)[0])
+    eager = np.asarray(synthesized_footprints(fmap, c)[0])
+    jitted = np.asarray(synthesized_jit(fmap, c)[0])
     np.testing.assert_allclose(jitted, eager, atol=1e-5)  # XLA fusion reorders float32 sums
 
 
