@@ -164,13 +164,13 @@ def set_toml_values(text: str, values: dict[str, float], source: str = "<text>")
         if len(path) < 3 or not isinstance(path[0], str) or not isinstance(path[1], int):
             raise JcrowdError(f"{source}: {key}: expected TABLE[i].KEY…, found {key!r}")
         table, i, field, index = path[0], path[1], str(path[2]), path[3:]
+        start, end = _value_span(text, table, i, field, source, key)
         node: Any = expected[table][i]
         holder: Any = node
         last: str | int = field
         for k in index:
             holder, last = holder[last], k
         holder[last] = value
-        start, end = _value_span(text, table, i, field, source, key)
         text = text[:start] + _toml(node[field]) + text[end:]
     if tomllib.loads(text) != expected:
         raise JcrowdError(f"{source}: expected the rewritten file to hold {values}, it does not")

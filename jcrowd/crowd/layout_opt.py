@@ -50,11 +50,12 @@ Readings taken:
   over the room so the queues at the doors stay short, and objectives that average over every
   agent and every step (the travel time). Measured in ``bench/optimize.py``: the gradient at the
   grid's points against the slope of the forward objective between them.
-- **Optimiser**: :func:`projected_gradient`, steepest descent projected on the box with an
-  Armijo backtracking line search on the forward objective and Barzilai–Borwein step lengths,
-  in coordinates scaled to the unit box. Chosen over optimistix's minimisers because the world
-  is rebuilt on the host between iterates (a host loop, not one compiled solve) and the box is
-  the only constraint; a Python loop over a few compiled gradients costs nothing extra.
+- **Optimiser**: :func:`projected_gradient`, descent along the gradient's direction projected
+  on the box, in coordinates scaled to the unit box, with step lengths in box units that grow
+  after a success and shrink after a failure, judged by the forward objective (the gradient's
+  magnitude is not used: in a jam it is off by orders of magnitude). Chosen over optimistix's
+  minimisers because the world is rebuilt on the host between iterates (a host loop, not one
+  compiled solve) and the box is the only constraint.
 
 Conventions: positions ``[x, z]`` in metres, time in seconds; ``θ`` in the key paths' units.
 """
@@ -467,7 +468,10 @@ def layout_setup(problem: LayoutProblem, theta: Sequence[float] | np.ndarray) ->
             ) from None
     xz = np.asarray(problem.peds.position, np.float64)
     for v in problem.varied:
-        shape = region_shape(scenario.layout.obstacles[v.obstacle])
+        # An agent's disc touching the obstacle (radius as spawned, m).
+        shape = region_shape(scenario.layout.obstacles[v.obstacle]).buffer(
+            float(np.max(np.asarray(problem.peds.radius)))
+        )
         inside = np.asarray(shapely.contains_xy(shape, xz[:, 0], xz[:, 1]))
         if inside.any():
             raise JcrowdError(
@@ -599,20 +603,21 @@ def projected_gradient(
     max_evaluations: int = 8,
     tol: float = 1e-2,
     first_step: float = 0.25,
-    armijo: float = 1e-4,
+    longest_step: float = 0.5,
     shrink: float = 0.3,
 ) -> OptimizeResult:
     """Minimise ``fun`` (``x → (value, gradient)``) over the box ``lower ≤ x ≤ upper``.
 
-    Steepest descent projected on the box, in coordinates scaled to the unit box
-    (``u = (x − lower)/(upper − lower)``): the first step moves ``first_step`` of the box along
-    the largest gradient component, later ones take the Barzilai–Borwein length
-    ``s·s / s·y`` (or double the last when ``s·y ≤ 0``). A step is kept when it lowers the
-    value by at least ``armijo`` times what the gradient promised (Armijo), else its length is
-    multiplied by ``shrink`` and the step tried again. Each try calls ``fun`` once.
+    Descent along the gradient's direction projected on the box, in coordinates scaled to the
+    unit box (``u = (x − lower)/(upper − lower)``): the trial point is
+    ``clip(u − h g/‖g‖_∞, 0, 1)``, so the step length ``h`` is in box units (``first_step`` at
+    first) and the gradient's magnitude is not used — in a jam it is off by many orders
+    (module docstring) while its direction may still say where to look. A trial that lowers
+    the value is kept and the next step is twice as long (at most ``longest_step``); one that
+    does not is dropped and ``h`` multiplied by ``shrink``. Each trial calls ``fun`` once.
 
-    Stops when the projected step is shorter than ``tol`` (in box units) or after
-    ``max_evaluations`` calls; returns the best point seen.
+    Stops when the projected step is shorter than ``tol`` (box units), when the gradient is not
+    finite, or after ``max_evaluations`` calls; returns the best point seen.
 
     Raises:
         JcrowdError: bounds with ``lower ≥ upper``, a start outside them, or a budget below 1.
@@ -634,27 +639,25 @@ def projected_gradient(
     path = [(x.copy(), float(value))]
     best = (x.copy(), float(value), np.asarray(grad, np.float64))
     evaluations, iterations, message = 1, 0, f"stopped after {max_evaluations} evaluations"
-    gmax = float(np.max(np.abs(g)))
-    alpha = first_step / gmax if gmax > 0 else 0.0
+    step = first_step
     while evaluations < max_evaluations:
-        trial = np.clip(u - alpha * g, 0.0, 1.0)
-        s = trial - u
-        if float(np.max(np.abs(s))) < tol:
+        if not np.all(np.isfinite(g)):
+            message = "stopped: the gradient is not finite (a jam? module docstring)"
+            break
+        gmax = float(np.max(np.abs(g)))
+        trial = np.clip(u - step * g / gmax, 0.0, 1.0) if gmax > 0 else u
+        if float(np.max(np.abs(trial - u))) < tol:
             message = f"converged: projected step below {tol:g} of the box"
             break
         xt = lo + trial * span
-        vt, gt_raw = fun(xt)
+        vt, gt = fun(xt)
         evaluations += 1
         path.append((xt.copy(), float(vt)))
-        if vt < best[1]:
-            best = (xt.copy(), float(vt), np.asarray(gt_raw, np.float64))
-        if vt <= value + armijo * float(g @ s):
-            gt = np.asarray(gt_raw, np.float64) * span
-            y, ss = gt - g, float(s @ s)
-            sy = float(s @ y)
-            alpha = ss / sy if sy > 0 else 2.0 * alpha
-            u, value, g = trial, float(vt), gt
+        if np.isfinite(vt) and vt < value:
+            best = (xt.copy(), float(vt), np.asarray(gt, np.float64))
+            u, value, g = trial, float(vt), np.asarray(gt, np.float64) * span
+            step = min(2.0 * step, longest_step)
             iterations += 1
         else:
-            alpha *= shrink
+            step *= shrink
     return OptimizeResult(best[0], best[1], best[2], tuple(path), evaluations, iterations, message)
