@@ -249,6 +249,6 @@ def test_cmu16_held_back_cycles_solved_at_most_half_the_forward_rules_error(
     sol = controls_for_footprints(model, fp, height=height)
     solved = footprint_errors(model, sol.controls, fp, height=height)
     forward = footprint_errors(model, sol.forward, fp, height=height)
-    # Measured (2026-11, this split): 16 cycles, 3.3 cm solved vs 11.9 cm forward (0.28x).
+    # Measured on this split: 15 cycles, 3.3 cm solved vs 11.9 cm forward (0.28x).
     assert len(fp) >= 12
     assert solved.mean() <= 0.5 * forward.mean(), (solved.mean(), forward.mean())

@@ -35,13 +35,20 @@ Footprint format (readings taken, stated):
   *synthesized* clip ends (cycle by cycle, forward); rotating and translating every footprint
   and ``θ`` together leaves the controls unchanged.
 
-The synthesized footprints ``F(c)`` are read from the decoded cycle at fixed *aligned* frames:
+The synthesized footprints ``F(c)`` (:mod:`jcrowd.model.footprint_map`, in JAX) are read from
+the decoded cycle at fixed *aligned* frames:
 0 (the opening strike: every sample starts there), the right strike and the closing strike,
 found once per model and level by running the contact detector on the cycle synthesized at the
 samples' median controls and mapping its frames to aligned time through the decoded ΔA. Cycles
 are time-aligned by DTW, so a strike sits at about the same aligned frame for every control.
 Between aligned frames the pose vector and root path are interpolated linearly. What the solver
 matches is therefore the model's own cycle, without foot locking (which moves the root).
+:func:`footprint_errors` measures the delivered clip instead (unwarped, strikes detected), as a
+capture is measured; on the model's own footprints the two agree to under 1.5 cm.
+
+Measured (``bench/footprints.py``, cmu16, cycles of takes held back from the fit): mean
+planted-foot error 3.4 cm solved vs 12.0 cm by the forward rule (0.28×); on turning cycles
+5.4 vs 22.9 cm.
 
 Forward rule (reading of "controls from the footprints' displacement alone"): ``(dx, dz)`` is
 the left foot's displacement over the cycle, closing minus opening footprint, in the start
