@@ -182,7 +182,7 @@ def figure(out: dict[str, Any], path: Any) -> None:
     ax.set_ylabel("mean travel time (s)" if out["objective"] == "travel_time" else out["objective"])
     ax.set_title(f"two_exits.toml: {out['agents']} people, two doors sharing 2 m", fontsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper center")
+    ax.legend(fontsize=8, loc="lower left")
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

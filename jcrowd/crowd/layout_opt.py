@@ -45,11 +45,16 @@ Readings taken:
   - ``flow``: minus the mean outflow ``(1/T) Σ_i o_i(T)`` (agents/s; reported positive).
 
 - **The jam limit** (:mod:`jcrowd.crowd.rollout`, "Limits"): where people press into a door the
-  pathwise derivative grows about ×1.4 per step, so the gradient of one long, dense evacuation
-  is noise. What keeps it usable here (``examples/two_exits.toml``): few agents (tens), spread
-  over the room so the queues at the doors stay short, and objectives that average over every
-  agent and every step (the travel time). Measured in ``bench/optimize.py``: the gradient at the
-  grid's points against the slope of the forward objective between them.
+  pathwise derivative grows about ×1.4 per step, so the gradient of a whole evacuation is not
+  the slope of the objective. Measured on ``examples/two_exits.toml`` (400 steps): with 40
+  people the exact gradient was NaN (float32 overflow) at 4 of 10 points and 1e17–1e35 at the
+  others; with 20 (the example) finite but 1e2–1e22, its sign agreeing with the forward
+  objective's slope at about half the points; truncated backpropagation
+  (``adjoint_decay`` 0.6) gave 1e-2 with the wrong sign (it loses the queue's effect). So the
+  optimiser uses only the gradient's direction and judges every step by the forward objective.
+  Where nobody queues (``tests/test_optimize.py``'s 8 people) the gradient equals central
+  differences (travel time within 1e-2, evacuation 1.8e-2); the flow objective's gradient did
+  not (−0.012 against −0.030; cause not found): do not trust it.
 - **Optimiser**: :func:`projected_gradient`, descent along the gradient's direction projected
   on the box, in coordinates scaled to the unit box, with step lengths in box units that grow
   after a success and shrink after a failure, judged by the forward objective (the gradient's
@@ -487,7 +492,7 @@ def layout_setup(problem: LayoutProblem, theta: Sequence[float] | np.ndarray) ->
     near = np.pad(near, ((0, 0), (0, width - near.shape[1])), constant_values=len(walls))
     dtype = problem.peds.speed.dtype
     world = World(
-        Navigation(jnp.asarray(np.stack(fields), jnp.float32), fg),
+        Navigation(jnp.asarray(np.stack(fields), dtype), fg),
         jnp.asarray(walls, dtype),
         jnp.asarray(near),
         spec,
@@ -614,7 +619,8 @@ def projected_gradient(
     first) and the gradient's magnitude is not used — in a jam it is off by many orders
     (module docstring) while its direction may still say where to look. A trial that lowers
     the value is kept and the next step is twice as long (at most ``longest_step``); one that
-    does not is dropped and ``h`` multiplied by ``shrink``. Each trial calls ``fun`` once.
+    does not is dropped and ``h`` multiplied by ``shrink``. Each trial calls ``fun`` once,
+    except one within ``tol`` of a point already evaluated (it shrinks ``h`` at once).
 
     Stops when the projected step is shorter than ``tol`` (box units), when the gradient is not
     finite, or after ``max_evaluations`` calls; returns the best point seen.
@@ -650,6 +656,9 @@ def projected_gradient(
             message = f"converged: projected step below {tol:g} of the box"
             break
         xt = lo + trial * span
+        if any(np.max(np.abs(xt - p) / span) < tol for p, _ in path):
+            step *= shrink  # evaluated already (and not kept): a shorter step, no call
+            continue
         vt, gt = fun(xt)
         evaluations += 1
         path.append((xt.copy(), float(vt)))
