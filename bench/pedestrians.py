@@ -97,8 +97,11 @@ MODEL = "collision-free-speed"
 """jcrowd's avoidance model in the bottleneck, entrance and fd sections (``--model``)."""
 
 
-def run_jcrowd(area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RADIUS, gap=SPAWN_GAP):
-    """jcrowd's dynamics; agents appear at ``spawn_t`` once their spot is free.
+def run_jcrowd(
+    area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RADIUS, gap=SPAWN_GAP, params=None
+):
+    """jcrowd's dynamics; agents appear at ``spawn_t`` once their spot is free. ``params``:
+    the avoidance model's (default: its defaults).
 
     Returns ``(positions (F, N, 2), alive (F, N))`` at every step and the seconds per step.
     """
@@ -106,7 +109,7 @@ def run_jcrowd(area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RADIU
     n = len(spawn_xy)
     xy = jnp.asarray(spawn_xy, jnp.float32)
     start = jnp.asarray(spawn_t, jnp.float32)
-    params = AvoidanceParams()
+    params = AvoidanceParams() if params is None else params
     peds = Pedestrians(
         xy,
         jnp.zeros(n, jnp.int32),

@@ -23,6 +23,7 @@ Handler = Callable[[argparse.Namespace], dict[str, Any]]
 
 
 def _build_parser() -> tuple[argparse.ArgumentParser, dict[str, Handler]]:
+    from jcrowd.cli import calibrate as calibrate_cmd
     from jcrowd.cli import demo as demo_cmd
     from jcrowd.cli import eval as eval_cmd
     from jcrowd.cli import export as export_cmd
@@ -50,6 +51,7 @@ def _build_parser() -> tuple[argparse.ArgumentParser, dict[str, Handler]]:
         export_cmd,
         demo_cmd,
         optimize_cmd,
+        calibrate_cmd,
     ):
         p = module.add_parser(sub)
         p.add_argument("--json", action="store_true", help="print one JSON object on stdout")

@@ -224,6 +224,7 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         grid=_neighbour_grid(scenario) if scenario.dynamics.avoid else None,
         far_every=scenario.dynamics.far_every,
         anticipate=scenario.dynamics.model == "anticipation",
+        avoidance=scenario.dynamics.avoidance,
     )
     config.check(levels)
     scene = None

@@ -9,6 +9,7 @@ reads from one step; :func:`init_state` builds the first state from spawned agen
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -16,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from jcrowd.crowd.avoidance import AvoidanceParams
 from jcrowd.crowd.clips import CrowdModel, next_clips
 from jcrowd.crowd.neighbours import GridSpec
 from jcrowd.crowd.synthesis import clip_core
@@ -63,6 +65,9 @@ class StepConfig:
         anticipate: with ``avoid``, agents anticipate each other's paths (the anticipation
             velocity model's reading in :mod:`jcrowd.crowd.avoidance`); off: the plain
             collision-free speed model.
+        avoidance: ``(name, value)`` pairs set on
+            :class:`~jcrowd.crowd.avoidance.AvoidanceParams` (e.g. calibrated ones,
+            ``[dynamics] params``); the others keep their defaults.
     """
 
     capacities: tuple[int, ...]
@@ -81,6 +86,12 @@ class StepConfig:
     grid: GridSpec | None = None
     far_every: int = 1
     anticipate: bool = False
+    avoidance: tuple[tuple[str, float], ...] = ()
+
+    def avoidance_params(self) -> AvoidanceParams:
+        """The avoidance model's parameters: the defaults with :attr:`avoidance` set."""
+        values: dict[str, Any] = dict(self.avoidance)
+        return AvoidanceParams(**values)
 
     def check(self, levels: int) -> None:
         """Raise :class:`JcrowdError` unless the settings fit a model with ``levels`` levels."""
@@ -108,6 +119,13 @@ class StepConfig:
             )
         if self.avoid and self.grid is None:
             raise JcrowdError("dynamics: expected a neighbour grid with avoid on, found none")
+        fields = AvoidanceParams.__dataclass_fields__
+        for name, value in self.avoidance:
+            if name not in fields or not 0 < value < float("inf"):
+                raise JcrowdError(
+                    f"dynamics.params: avoidance.{name}: expected a positive number named one of "
+                    f"{', '.join(sorted(fields))}, found {name} = {value}"
+                )
         if self.importance not in ("distance", "pixels"):
             raise JcrowdError(
                 f"lod.importance: expected 'distance' or 'pixels', found {self.importance!r}"

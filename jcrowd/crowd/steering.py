@@ -92,6 +92,7 @@ def steer(
     previous: tuple[Array, Array] | None = None,
     anticipate: bool = False,
     dt: Array | float = 1 / 30,
+    params: AvoidanceParams | None = None,
 ) -> tuple[Array, Array, Array]:
     """Velocity ``(vx, vz)`` (m/s) of each agent walking to ``(tx, tz)``, and the grid overflow.
 
@@ -113,6 +114,8 @@ def steer(
     direction over the reaction time, by the ``dt`` s since their last update (a scalar, or
     one per agent: far agents updating every k steps relax by k steps at a time;
     :mod:`jcrowd.crowd.avoidance`).
+
+    ``params``: the avoidance model's parameters (default: its defaults).
     """
     n = x.shape[0]
     px, pz = (jnp.zeros(n, x.dtype), jnp.zeros(n, x.dtype)) if previous is None else previous
@@ -153,7 +156,7 @@ def steer(
     else:
         walls, wall_ids = scene.walls, scene.cell_walls[cell_index(grid, here)]
     velocity = avoid_in_grid(
-        AvoidanceParams(),
+        AvoidanceParams() if params is None else params,
         grid,
         cells,
         here,

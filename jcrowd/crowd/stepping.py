@@ -308,6 +308,7 @@ def step(
             (state.vx, state.vz),
             config.anticipate,
             elapsed,
+            config.avoidance_params(),
         )
         # The decode reads the velocity the root walks this step (follow_phase).
         state = eqx.tree_at(lambda s: (s.vx, s.vz), state, (vx, vz))

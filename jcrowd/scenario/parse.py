@@ -189,6 +189,47 @@ class _Reader:
             self.fail("model", f"expected an existing model file, found {show(value)} (no {path})")
         return str(path)
 
+    def dynamics(self, value: Any, base_dir: pathlib.Path) -> DynamicsSettings:
+        keys = ("avoid", "model", "radius", "far_every", "params")
+        table = dict(self.table(value, "dynamics", keys))
+        if "params" in table:
+            table["params"], table["avoidance"] = self.params(table["params"], base_dir)
+        return self.build("dynamics", DynamicsSettings, **table)
+
+    def params(
+        self, value: Any, base_dir: pathlib.Path
+    ) -> tuple[str, tuple[tuple[str, float], ...]]:
+        """A parameters file (``jcrowd calibrate --out``): its ``[avoidance]`` numbers; the
+        names are checked against the model's when the step is prepared."""
+        at = "dynamics.params"
+        if not isinstance(value, str) or not value:
+            self.fail(at, f"expected a parameters file path, found {show(value)}")
+        path = pathlib.Path(value).expanduser()
+        path = (path if path.is_absolute() else base_dir / path).resolve()
+        try:
+            doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        except OSError:
+            self.fail(at, f"expected an existing parameters file, found {show(value)} (no {path})")
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+            self.fail(at, f"{path}: expected a TOML parameters file, found an invalid one ({e})")
+        unknown = sorted(set(doc) - {"avoidance", "population", "calibration"})
+        table = doc.get("avoidance")
+        if unknown or not isinstance(table, dict):
+            self.fail(
+                at,
+                f"{path}: expected an [avoidance] table of numbers (and optionally [population], "
+                f"[calibration]), found tables {sorted(doc)}",
+            )
+        pairs = []
+        for name, v in table.items():
+            ok = isinstance(v, int | float) and not isinstance(v, bool) and 0 < v < float("inf")
+            if not ok:
+                self.fail(
+                    at, f"{path}: avoidance.{name}: expected a positive number, found {show(v)}"
+                )
+            pairs.append((str(name), float(v)))
+        return str(path), tuple(pairs)
+
 
 def _join(path: str, key: str) -> str:
     if not path or not key:
@@ -241,13 +282,7 @@ def parse_scenario(
         camera=r.camera(doc["camera"]),
         lod=r.build("lod", LodSettings, **{_LOD[k]: v for k, v in lod.items()}),
         layout=r.layout(doc),
-        dynamics=r.build(
-            "dynamics",
-            DynamicsSettings,
-            **r.table(
-                doc.get("dynamics", {}), "dynamics", ("avoid", "model", "radius", "far_every")
-            ),
-        ),
+        dynamics=r.dynamics(doc.get("dynamics", {}), base),
         sources=r.sources(doc),
     )
 

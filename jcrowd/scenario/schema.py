@@ -301,12 +301,16 @@ class DynamicsSettings:
     counter-flows pass; see :mod:`jcrowd.crowd.avoidance`). ``radius``: the body disc kept clear
     around each agent (m, 0.1–0.4). ``far_every``: agents drawn coarser than the blended near
     levels, or not drawn, compute their avoidance every ``far_every`` steps, in turn (1–8; 1: every
-    agent every step)."""
+    agent every step). ``params``: a parameters file (``jcrowd calibrate --out``; its
+    ``[avoidance]`` table sets fields of :class:`~jcrowd.crowd.avoidance.AvoidanceParams`, the rest
+    keep their defaults); ``avoidance`` holds what it set, as ``(name, value)``pairs."""
 
     avoid: bool = False
     model: str = "collision-free-speed"
     radius: float = 0.2
     far_every: int = 1
+    params: str | None = None
+    avoidance: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
         require(isinstance(self.avoid, bool), "avoid", "true or false", self.avoid)

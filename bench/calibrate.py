@@ -1,0 +1,151 @@
+"""Calibration of the dynamics to the six HERMES runs, judged by the fundamental diagram (issue 22,
+item 2).
+
+- **Fit**: :func:`jcrowd.crowd.calibrate.calibrate` (short windows from the measured states,
+  Levenberg–Marquardt on the logarithms) from three starts: every fitted parameter ×1.3, ×0.7,
+  and alternately ×1.3 / ×0.7 of the model's default (``--names``).
+- **Judge**: each fit's parameters run the crowd-dynamics bench's fundamental-diagram section
+  (``bench/pedestrians.py``: each run re-simulated from its measured entry times, PedPy's
+  Voronoi speed in the measurement area over the steady state) and give its
+  ``fd_speed_rmse_m_s``; the defaults' is measured in the same process. A fitted
+  ``desired_speed`` is every agent's free speed in that run.
+- Done-when: every fit's RMSE ≤ the defaults', and each fitted parameter within ±10 % of the
+  three fits' median.
+
+``python bench/calibrate.py [--names time_gap,desired_speed] [--horizon 0.5] [--json]
+[--no-record]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+import time
+from pathlib import Path
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+import pedestrians as ped
+from common import machine, report
+
+from jcrowd.crowd.avoidance import AvoidanceParams
+from jcrowd.crowd.calibrate import SPEED_NAME, calibrate, make_windows, merge_windows
+from jcrowd.io.trajectories import load_hermes_runs
+
+
+def fd_rmse(folder, params, speed):
+    """``fd_speed_rmse_m_s`` of jcrowd alone under ``params`` and free speed ``speed``."""
+    steady = pd.read_csv(folder / "steady_state.csv").set_index("run")
+    rows = []
+    for f in sorted(folder.glob("uo-*.txt")):
+        m = re.match(r"uo-(\d+)-(\d+)-(\d+)", f.stem)
+        if not m or f.stem not in steady.index:
+            continue
+        d = np.loadtxt(f, comments="#")
+        d[:, 2:4] /= 100.0
+        spawn_xy, spawn_t = ped.hermes_feed(d)
+        area, target = ped.hermes_scene(float(m.group(3)))
+        measured = ped._fd_measure(d, ped.HERMES_FPS, steady.loc[f.stem], ped.HERMES_AREA)
+        t_ref = d[:, 1].max() / ped.HERMES_FPS
+        p, a, _ = ped.run_jcrowd(area, target, spawn_xy, spawn_t, 3 * t_ref, speed, params=params)
+        sim = ped._fd_measure_sim(p, a, steady.loc[f.stem], area)
+        rows.append((f.stem, measured[1], sim[1], measured[0], sim[0]))
+    err = np.array([r[2] - r[1] for r in rows])
+    return float(np.sqrt(np.mean(err**2))), rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--hermes", default=str(ped.DATA / "hermes_uo"))
+    ap.add_argument("--names", default="time_gap,desired_speed")
+    ap.add_argument("--horizon", type=float, default=0.5)
+    ap.add_argument("--max-steps", type=int, default=40)
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--no-record", action="store_true")
+    args = ap.parse_args()
+    names = tuple(args.names.split(","))
+    defaults = AvoidanceParams()
+    base = {n: (ped.SPEED if n == SPEED_NAME else float(getattr(defaults, n))) for n in names}
+    factors = [
+        [1.3] * len(names),
+        [0.7] * len(names),
+        [1.3 if k % 2 == 0 else 0.7 for k in range(len(names))],
+    ]
+    runs = load_hermes_runs([args.hermes])
+    batches = merge_windows(
+        [
+            make_windows(r.rows, r.fps, r.steady, r.corridor_m, r.exit_m, horizon_s=args.horizon)[0]
+            for r in runs
+        ]
+    )
+    folder = Path(args.hermes)
+    t0 = time.perf_counter()
+    rmse_default, rows_default = fd_rmse(folder, defaults, ped.SPEED)
+    print(f"defaults: fd_speed_rmse {rmse_default:.3f} m/s", file=sys.stderr, flush=True)
+    fits = []
+    for fac in factors:
+        start = {n: base[n] * f for n, f in zip(names, fac, strict=True)}
+        t1 = time.perf_counter()
+        cal = calibrate(batches, start, max_steps=args.max_steps)
+        fit_s = time.perf_counter() - t1
+        fitted = dict(zip(names, map(float, cal.values), strict=True))
+        params = defaults
+        for n, v in fitted.items():
+            if n != SPEED_NAME:
+                params = eqx.tree_at(lambda p, n=n: getattr(p, n), params, jnp.asarray(v))
+        rmse, rows = fd_rmse(folder, params, fitted.get(SPEED_NAME, ped.SPEED))
+        fits.append(
+            {
+                "start": {n: round(v, 4) for n, v in start.items()},
+                "fitted": {n: round(v, 4) for n, v in fitted.items()},
+                "window_rms_start_m_s": round(cal.rms_start, 4),
+                "window_rms_m_s": round(cal.rms, 4),
+                "steps": cal.steps,
+                "converged": cal.converged,
+                "singular_values": [round(float(s), 4) for s in cal.singular_values],
+                "fit_seconds": round(fit_s, 1),
+                "fd_speed_rmse_m_s": round(rmse, 3),
+                "fd_speeds": {r[0]: round(r[2], 3) for r in rows},
+            }
+        )
+        print(f"fit {fits[-1]}", file=sys.stderr, flush=True)
+    med = {n: float(np.median([f["fitted"][n] for f in fits])) for n in names}
+    spread = max(abs(f["fitted"][n] / med[n] - 1) for f in fits for n in names)
+    out = {
+        "names": list(names),
+        "horizon_s": args.horizon,
+        "windows": int(sum(b.position.shape[0] for b in batches)),
+        "fd_speed_rmse_default_m_s": round(rmse_default, 3),
+        "fd_measured_speeds": {r[0]: round(r[1], 3) for r in rows_default},
+        "fd_default_speeds": {r[0]: round(r[2], 3) for r in rows_default},
+        "fits": fits,
+        "max_rel_spread": round(spread, 4),
+        "fd_not_worse": all(f["fd_speed_rmse_m_s"] <= round(rmse_default, 3) for f in fits),
+        "stable_10pct": spread <= 0.10,
+        "seconds": round(time.perf_counter() - t0, 1),
+    }
+    lines = [
+        f"names {', '.join(names)}; horizon {args.horizon} s; {out['windows']} windows; "
+        f"defaults' fd_speed_rmse {out['fd_speed_rmse_default_m_s']} m/s",
+        "",
+        "| start | fitted | window RMS (m/s) | LM steps | fd_speed_rmse (m/s) |",
+        "|---|---|---|---|---|",
+        *(
+            f"| {f['start']} | {f['fitted']} | {f['window_rms_start_m_s']} → "
+            f"{f['window_rms_m_s']} | {f['steps']} | {f['fd_speed_rmse_m_s']} |"
+            for f in fits
+        ),
+        "",
+        f"largest deviation from the fits' median: {100 * spread:.1f} %; fd not worse than the "
+        f"defaults: {out['fd_not_worse']}",
+    ]
+    report(
+        "calibrate", f"{machine()}, dt 1/30 s", out, "\n".join(lines), args.json, not args.no_record
+    )
+
+
+if __name__ == "__main__":
+    main()
