@@ -391,6 +391,12 @@ def _all_residuals(
     return jnp.concatenate([window_residuals(names, values, b) for b in batches])
 
 
+def _fn(y: Array, args: tuple[tuple[WindowBatch, ...], tuple[str, ...]]) -> Array:
+    """The residuals in the log-parameters; one function object, so optimistix's compiled
+    solve is reused across calls with batches of the same shapes."""
+    return _all_residuals(y, *args)
+
+
 def calibrate(
     batches: Sequence[WindowBatch],
     start: dict[str, float],
@@ -416,13 +422,11 @@ def calibrate(
     group = tuple(batches)
     y0 = jnp.log(jnp.asarray(x0, jnp.float32))
 
-    def fn(y: Array, args: None) -> Array:
-        return _all_residuals(y, group, names)
-
+    args = (group, names)
     solver: Any = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    sol: Any = optx.least_squares(fn, solver, y0, max_steps=max_steps, throw=False)
-    r0, r1 = fn(y0, None), fn(sol.value, None)
-    jac = jax.jacfwd(fn)(sol.value, None)
+    sol: Any = optx.least_squares(_fn, solver, y0, args, max_steps=max_steps, throw=False)
+    r0, r1 = _fn(y0, args), _fn(sol.value, args)
+    jac = jax.jacfwd(_fn)(sol.value, args)
     return Calibration(
         names,
         x0,

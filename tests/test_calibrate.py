@@ -1,0 +1,227 @@
+"""Calibration to measured trajectories (issue 22, item 2): the run reader, the parameters file
+a scenario names, the window residuals against a plain loop of the step, and recovery of
+known parameters from trajectories the model itself made."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jcrowd.crowd.avoidance import AvoidanceParams
+from jcrowd.crowd.calibrate import (
+    calibrate,
+    corridor_scene,
+    make_windows,
+    merge_windows,
+    window_residuals,
+)
+from jcrowd.crowd.dynamics import Pedestrians, build_world, pedestrian_step
+from jcrowd.crowd.state import StepConfig
+from jcrowd.errors import DataError, JcrowdError, ScenarioError
+from jcrowd.io.trajectories import load_hermes_run, load_hermes_runs
+from jcrowd.scenario.parse import parse_scenario
+
+FPS = 30.0  # synthetic runs are recorded at the step's rate: a window is whole frames and steps
+
+# The plain loops below call one compiled step (eager, op by op, a step compiles its many small
+# operations one at a time: minutes); the loop itself stays Python, which is what they check.
+_step = eqx.filter_jit(pedestrian_step)
+
+
+# ------------------------------------------------------------------------------ reader
+
+
+def test_hermes_run_is_read_in_metres_with_its_steady_frames(tmp_path: Path) -> None:
+    (tmp_path / "uo-050-180-120.txt").write_text(
+        "# id frame x y z\n1 10 90.0 -150.0 170\n1 11 90 -160 170\n"
+    )
+    (tmp_path / "steady_state.csv").write_text("run,first_frame,last_frame\nuo-050-180-120,10,11\n")
+    run = load_hermes_run(tmp_path / "uo-050-180-120.txt")
+    assert (run.entrance_m, run.corridor_m, run.exit_m) == (0.5, 1.8, 1.2)
+    np.testing.assert_allclose(run.rows, [[1, 10, 0.9, -1.5], [1, 11, 0.9, -1.6]])
+    assert run.steady == (10, 11) and run.fps == 16.0
+    assert [r.name for r in load_hermes_runs([tmp_path])] == ["uo-050-180-120"]
+
+
+def test_bad_runs_are_errors_naming_the_file_and_line(tmp_path: Path) -> None:
+    bad = tmp_path / "uo-050-180-180.txt"
+    bad.write_text("1 10 90 -150\n1 eleven 90 -160\n")
+    with pytest.raises(DataError, match=r"uo-050-180-180.txt:2: expected 'id frame x y"):
+        load_hermes_run(bad)
+    with pytest.raises(DataError, match="uo-<entrance>-<corridor>-<exit>"):
+        load_hermes_run(tmp_path / "corridor.txt")
+    with pytest.raises(DataError, match=r"no rows|found none"):
+        (tmp_path / "uo-1-2-3.txt").write_text("# nothing\n")
+        load_hermes_run(tmp_path / "uo-1-2-3.txt")
+
+
+# ------------------------------------------------------------------------------ params file
+
+_SCENARIO = """
+duration = 2.0
+ground = {{ shape = "rect", center = [0, 0], size = [20, 20] }}
+camera = {{ eye = [0, 10, -20], target = [0, 0, 0] }}
+[[groups]]
+count = 4
+spawn = {{ shape = "rect", center = [0, 0], size = [4, 4] }}
+goal = {{ shape = "rect", center = [0, 8], size = [4, 2] }}
+[dynamics]
+avoid = true
+params = "{params}"
+"""
+
+
+def test_a_scenario_takes_the_calibrated_parameters_and_refuses_bad_ones(tmp_path: Path) -> None:
+    (tmp_path / "p.toml").write_text(
+        "[avoidance]\ntime_gap = 0.45\nplain_reaction_time = 0.2\n"
+        "[population]\ndesired_speed = 1.5\n"
+    )
+    sc = parse_scenario(_SCENARIO.format(params="p.toml"), "s.toml", base_dir=tmp_path)
+    assert dict(sc.dynamics.avoidance) == {"time_gap": 0.45, "plain_reaction_time": 0.2}
+    config = StepConfig((1,), (), avoidance=sc.dynamics.avoidance)
+    got = config.avoidance_params()
+    assert float(got.time_gap) == pytest.approx(0.45) and float(got.strength) == 8.0
+    with pytest.raises(ScenarioError, match=r"s.toml: dynamics.params: expected an existing"):
+        parse_scenario(_SCENARIO.format(params="nope.toml"), "s.toml", base_dir=tmp_path)
+    (tmp_path / "bad.toml").write_text("[avoidance]\ntime_gap = -1\n")
+    with pytest.raises(ScenarioError, match=r"avoidance.time_gap: expected a positive number"):
+        parse_scenario(_SCENARIO.format(params="bad.toml"), "s.toml", base_dir=tmp_path)
+    (tmp_path / "odd.toml").write_text("[avoid]\ntime_gap = 1\n")
+    with pytest.raises(ScenarioError, match=r"expected an \[avoidance\] table"):
+        parse_scenario(_SCENARIO.format(params="odd.toml"), "s.toml", base_dir=tmp_path)
+    with pytest.raises(
+        JcrowdError, match=r"avoidance\.time_gapp: expected a positive number named"
+    ):
+        StepConfig((1,), (), avoidance=(("time_gapp", 1.0),)).check(1)
+
+
+# ------------------------------------------------------------------------------ windows
+
+
+def _synthetic_run(params: AvoidanceParams, speed: float, people: int = 10, frames: int = 75):
+    """Rows ``id frame x y`` of people walking down the 1.8 m corridor, stepped by the plain
+    loop of :func:`pedestrian_step` at ``FPS`` (the model making its own "measurement")."""
+    area, target, _ = corridor_scene(1.8, 1.8)
+    world = build_world(area, [target])
+    rng = np.random.default_rng(3)
+    xy = np.stack(
+        [
+            rng.uniform(0.35, 1.45, people),
+            np.linspace(1.5, -3.0, people) + rng.uniform(0, 0.1, people),
+        ],
+        axis=1,
+    )
+    peds = Pedestrians(
+        jnp.asarray(xy, jnp.float32),
+        jnp.zeros(people, jnp.int32),
+        jnp.full(people, speed, jnp.float32),
+        jnp.full(people, 0.2, jnp.float32),
+        jnp.ones(people, bool),
+        jnp.zeros((people, 2), jnp.float32),
+        False,
+    )
+    rows = []
+    for f in range(frames):
+        p = np.asarray(peds.position)
+        rows += [[i, f, p[i, 0], p[i, 1]] for i in range(people)]
+        peds, _ = _step(params, world, peds, 1.0 / FPS)
+    return np.asarray(rows, np.float64)
+
+
+def _loop_residuals(batch, params: AvoidanceParams, speed: float) -> np.ndarray:
+    """The residuals by hand: each window stepped in a Python loop, speeds in NumPy."""
+    out = []
+    for w in range(batch.position.shape[0]):
+        n = batch.position.shape[1]
+        alive = batch.alive[w]
+        peds = Pedestrians(
+            batch.position[w],
+            jnp.zeros(n, jnp.int32),
+            jnp.full(n, speed, jnp.float32),
+            jnp.full(n, 0.2, jnp.float32),
+            alive,
+            jnp.where(alive[:, None], batch.velocity[w], 0.0),
+            False,
+        )
+        for _ in range(batch.steps):
+            peds, _ = _step(params, batch.world, peds, 1.0 / 30.0)
+        p0, c = np.asarray(batch.position[w]), np.asarray(batch.counted[w])
+        sim = np.linalg.norm(np.asarray(peds.position) - p0, axis=1)
+        meas = np.linalg.norm(np.asarray(batch.end[w]) - p0, axis=1)
+        h = batch.steps / 30.0
+        out.append(np.sum(c * (sim - meas)) / h / max(c.sum(), 1))
+    return np.asarray(out)
+
+
+TRUE = {"time_gap": 0.45, "desired_speed": 1.5}
+
+
+@pytest.fixture(scope="module")
+def synthetic_batch():
+    params = AvoidanceParams(time_gap=0.45)
+    rows = _synthetic_run(params, 1.5)
+    # From frame 20 on: the people start at rest, and in the first ~0.5 s (their reaction
+    # time's acceleration) the backward-difference start velocity lags the true one.
+    batch, starts = make_windows(rows, FPS, (20, 74), 1.8, 1.8, horizon_s=0.5, every_s=0.5)
+    return batch, starts
+
+
+@pytest.mark.slow
+def test_window_residuals_equal_a_plain_loop_and_jit_equals_eager(synthetic_batch) -> None:
+    batch, starts = synthetic_batch
+    assert len(starts) >= 3 and int(batch.counted.sum()) > 0
+    names = ("time_gap", "desired_speed")
+    values = jnp.asarray([0.7, 1.2], jnp.float32)
+    got = window_residuals(names, values, batch)
+    want = _loop_residuals(batch, AvoidanceParams(time_gap=0.7), 1.2)
+    # float32 positions after 15 steps (~1 m): 1e-5 m/s would be rounding; 1e-4 leaves room
+    # for XLA's fused sums while a wrong horizon, mask or start position is ≥ 1e-2 off.
+    np.testing.assert_allclose(np.asarray(got), want, atol=1e-4)
+    jitted = jax.jit(lambda v: window_residuals(names, v, batch))(values)
+    np.testing.assert_allclose(np.asarray(jitted), np.asarray(got), atol=1e-5)
+    # Merging a batch with itself is the same windows twice (padding changes nothing).
+    merged = merge_windows([batch, batch])
+    assert len(merged) == 1
+    twice = window_residuals(names, values, merged[0])
+    np.testing.assert_allclose(np.asarray(twice), np.tile(np.asarray(got), 2), atol=1e-5)
+
+
+def test_at_the_generating_parameters_the_residuals_are_small(synthetic_batch) -> None:
+    """The model's own trajectories are matched by the model's own parameters (the start
+    velocity is a difference estimate, so not exactly: within 2 cm/s)."""
+    batch, _ = synthetic_batch
+    names = tuple(TRUE)
+    at_truth = window_residuals(names, jnp.asarray(list(TRUE.values()), jnp.float32), batch)
+    off = window_residuals(names, jnp.asarray([0.45, 1.2], jnp.float32), batch)
+    assert float(jnp.max(jnp.abs(at_truth))) < 0.02 < float(jnp.max(jnp.abs(off)))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("factor", [1.3, 0.7])
+def test_calibration_recovers_known_parameters_from_a_perturbed_start(
+    synthetic_batch, factor
+) -> None:
+    batch, _ = synthetic_batch
+    start = {n: v * factor for n, v in TRUE.items()}
+    cal = calibrate([batch], start, max_steps=30)
+    assert cal.rms < 0.2 * cal.rms_start
+    # 5 %: what the difference-estimated start velocity leaves (the residuals at the truth
+    # are under 2 cm/s, not 0); a fit that stalls at the ±30 % start is 30 % off.
+    np.testing.assert_allclose(cal.values, list(TRUE.values()), rtol=0.05)
+    assert json.dumps(cal.values.tolist())  # finite numbers
+
+
+def test_bad_names_and_starts_are_errors(synthetic_batch) -> None:
+    batch, _ = synthetic_batch
+    with pytest.raises(JcrowdError, match="expected distinct parameter names"):
+        calibrate([batch], {"time_gapp": 0.5})
+    with pytest.raises(JcrowdError, match="expected positive start values"):
+        calibrate([batch], {"time_gap": -0.5})
+    with pytest.raises(JcrowdError, match="whole frames"):
+        make_windows(np.zeros((1, 4)), 16.0, (0, 100), 1.8, 1.8, horizon_s=0.3)
