@@ -117,7 +117,9 @@ def test_refit_batch_equals_frame_by_frame() -> None:
     # float32 rounding differs between batch sizes, and a turn the positions hardly see can
     # drift further than the places do. Run to convergence (30 steps): frame 0 lies in a flat
     # valley where, after 12 steps, batch and single differ by 6e-8 m² of cost but 1.2 mm of
-    # place (rounding picks other accept/refuse paths); converged, they agree to 1.6e-5 m.
+    # place (rounding picks other accept/refuse paths); converged, they agree to 1.6e-5 m here
+    # and to 5.3e-5 m in one full-suite run (3 of 120 places; the flat valley again). 1e-4 m
+    # (0.1 mm) holds both; frames mixed up between batch and single would be centimetres off.
     rot = _rotations(5, 3, 0.2)
     key, kept = _key(), (0, 2, 6)
     whole = refit_kept_rotations(SKELETON, rot, kept, key, max_steps=30)
@@ -125,7 +127,7 @@ def test_refit_batch_equals_frame_by_frame() -> None:
         [refit_kept_rotations(SKELETON, rot[f : f + 1], kept, key, max_steps=30) for f in range(5)]
     )
     place = np.stack([_positions_loop(q) for q in whole])
-    np.testing.assert_allclose(place, np.stack([_positions_loop(q) for q in single]), atol=2e-5)
+    np.testing.assert_allclose(place, np.stack([_positions_loop(q) for q in single]), atol=1e-4)
 
 
 def test_refit_rejects_bad_input() -> None:

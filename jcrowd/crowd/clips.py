@@ -123,7 +123,7 @@ def build_crowd_model(model: MotionModel) -> CrowdModel:
     ranges = np.asarray(model.control_ranges, np.float32)
     feet = find_feet(model.skeleton)
     foot_joints = (feet.left_ankle, feet.left_toe, feet.right_ankle, feet.right_toe)
-    mean_clip = clip_weights(dec, jnp.asarray(samples.mean(axis=0), jnp.float32))
+    mean_clip = eqx.filter_jit(clip_weights)(dec, jnp.asarray(samples.mean(axis=0), jnp.float32))
     return CrowdModel(
         dec,
         jnp.asarray(ranges[:, 0]),
@@ -156,7 +156,8 @@ def double_support_phases(
         y = pose_from_coeffs(lv, coeffs_at(lv, core, tau))
         return level_points(lv, y, zero, jnp.float32(0.0), jnp.float32(1.0))
 
-    pts = np.asarray(jax.vmap(points)(jnp.arange(last, dtype=jnp.float32)))
+    # One compiled program: eager, the decode and FK ran as ~330 small compiles (10 s).
+    pts = np.asarray(jax.jit(jax.vmap(points))(jnp.arange(last, dtype=jnp.float32)))
     apart = pts[:, feet[0], 2] - pts[:, feet[2], 2]  # heading 0 faces +z
     return float(np.argmax(apart)), float(np.argmin(apart))
 
