@@ -43,7 +43,6 @@ Readings taken:
     ``T_i`` with ``τ_E`` = 1 s: within ``τ_E log N`` below the last exit time, and smooth where
     the last agent changes.
   - ``flow``: minus the mean outflow ``(1/T) Σ_i o_i(T)`` (agents/s; reported positive).
-
 - **The jam limit** (:mod:`jcrowd.crowd.rollout`, "Limits"): where people press into a door the
   pathwise derivative grows about ×1.4 per step, so the gradient of a whole evacuation is not
   the slope of the objective. Measured on ``examples/two_exits.toml`` (400 steps): with 40
@@ -55,22 +54,15 @@ Readings taken:
   Where nobody queues (``tests/test_optimize.py``'s 8 people) the gradient equals central
   differences (travel time within 1e-2, evacuation 1.8e-2); the flow objective's gradient did
   not (−0.012 against −0.030; cause not found): do not trust it.
-- **Optimiser**: :func:`projected_gradient`, descent along the gradient's direction projected
-  on the box, in coordinates scaled to the unit box, with step lengths in box units that grow
-  after a success and shrink after a failure, judged by the forward objective (the gradient's
-  magnitude is not used: in a jam it is off by orders of magnitude). Chosen over optimistix's
-  minimisers because the world is rebuilt on the host between iterates (a host loop, not one
-  compiled solve) and the box is the only constraint.
+- **Optimiser**: :func:`~jcrowd.crowd.layout_search.projected_gradient` (its module says how).
 
 Conventions: positions ``[x, z]`` in metres, time in seconds; ``θ`` in the key paths' units.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
-import re
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -83,12 +75,13 @@ from jaxtyping import Array, Float
 
 from jcrowd.crowd.avoidance import AvoidanceParams
 from jcrowd.crowd.dynamics import Pedestrians, World, wall_segments, walls_near_cells
+from jcrowd.crowd.layout_keys import Varied, parse_key_path, varied_parameter, with_values
+from jcrowd.crowd.layout_search import OptimizeResult, projected_gradient
 from jcrowd.crowd.navigation import Navigation, distance_field, field_grid, field_values, rasterize
 from jcrowd.crowd.neighbours import grid_spec
 from jcrowd.crowd.rollout import COUNT_TEMPERATURE, RolloutParams, RolloutSetup, rollout
 from jcrowd.crowd.scene import CLEARANCE_M, NAV_CELL_M
-from jcrowd.errors import JcrowdError, ScenarioError
-from jcrowd.scenario.check import Problem
+from jcrowd.errors import JcrowdError
 from jcrowd.scenario.geometry import Region
 from jcrowd.scenario.layout import Layout, free_space, region_shape
 from jcrowd.scenario.schema import Scenario
@@ -125,122 +118,6 @@ OUT_DEPTH = 1.0
 _CIRCLE_SIDES = 64  # region_shape draws a circle as a 64-gon (quad_segs=16)
 _GRID_CELL_M = 1.6  # the simulator's neighbour grid cell (jcrowd.crowd.simulate)
 _GRID_DENSITY = 8.0  # agents per m² a cell holds (× 1.5): queues at a door are dense
-_FIELDS = {"rect": ("center", "size"), "circle": ("center", "radius"), "polygon": ("points",)}
-
-
-# ------------------------------------------------------------------------------ key paths
-
-
-def parse_key_path(key: str) -> tuple[str | int, ...]:
-    """``"obstacles[1].center[0]"`` → ``("obstacles", 1, "center", 0)``.
-
-    Raises:
-        JcrowdError: text that is not names joined by dots, each with optional ``[index]``es.
-    """
-    parts: list[str | int] = []
-    for name in key.split("."):
-        m = re.fullmatch(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[\d+\])*)", name)
-        if m is None:
-            raise JcrowdError(
-                f"key path {key!r}: expected names joined by dots, each with optional [index]es "
-                f"(e.g. obstacles[1].center[0]), found {name!r}"
-            )
-        parts.append(m.group(1))
-        parts += [int(i) for i in re.findall(r"\[(\d+)\]", m.group(2))]
-    return tuple(parts)
-
-
-@dataclass(frozen=True)
-class Varied:
-    """One varied number: ``key`` (its TOML key path), the obstacle it belongs to, the field
-    (``center``, ``size``, ``radius``, ``points``) and the index inside it, and its bounds."""
-
-    key: str
-    obstacle: int
-    field: str
-    index: tuple[int, ...]
-    lower: float
-    upper: float
-
-
-def _default_bounds(field: str, value: float) -> tuple[float, float]:
-    if field in ("size", "radius"):
-        return 0.5 * value, 1.5 * value
-    return value - 1.0, value + 1.0
-
-
-def varied_parameter(
-    scenario: Scenario, key: str, bounds: tuple[float, float] | None = None
-) -> Varied:
-    """The :class:`Varied` number at ``key`` with ``bounds`` (default: ±1 m for coordinates,
-    ×0.5 … ×1.5 for sizes and radii).
-
-    Raises:
-        JcrowdError: a key that is not a number of an ``[[obstacles]]`` table of the scenario,
-            or bounds that do not hold its current value.
-    """
-    path = parse_key_path(key)
-    head = f"{scenario.source}: {key}"
-    obstacles = scenario.layout.obstacles
-    if len(path) < 3 or path[0] != "obstacles" or not isinstance(path[1], int):
-        raise JcrowdError(
-            f"{head}: expected a key of an [[obstacles]] table (e.g. obstacles[0].center[0]), "
-            f"found {key!r}"
-        )
-    i, field, index = path[1], path[2], path[3:]
-    if i >= len(obstacles):
-        raise JcrowdError(f"{head}: expected an obstacle index below {len(obstacles)}, found {i}")
-    region = obstacles[i]
-    if field not in _FIELDS[region.kind]:
-        allowed = ", ".join(_FIELDS[region.kind])
-        raise JcrowdError(
-            f"{head}: expected one of {allowed} (a {region.kind}'s numbers), found {field!r}"
-        )
-    value = np.asarray(getattr(region, str(field)), np.float64)
-    if any(not isinstance(k, int) for k in index) or len(index) != value.ndim:
-        raise JcrowdError(
-            f"{head}: expected a number ({value.ndim} index(es) into {field}), found "
-            f"{'an array' if len(index) < value.ndim else 'too many indexes'}"
-        )
-    ints = tuple(int(k) for k in index)
-    if any(k >= n for k, n in zip(ints, value.shape, strict=True)):
-        raise JcrowdError(f"{head}: expected indexes within {list(value.shape)}, found {ints}")
-    current = float(value[ints])
-    lo, hi = bounds if bounds is not None else _default_bounds(str(field), current)
-    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-        raise JcrowdError(f"{head}: expected bounds lo < hi, found [{lo}, {hi}]")
-    if not lo <= current <= hi:
-        raise JcrowdError(
-            f"{head}: expected bounds holding its value {current:g}, found [{lo}, {hi}]"
-        )
-    return Varied(key, i, str(field), ints, float(lo), float(hi))
-
-
-def with_values(
-    scenario: Scenario, varied: Sequence[Varied], theta: Sequence[float] | np.ndarray
-) -> Scenario:
-    """The scenario with each varied number set to ``theta`` (checked as a parsed one is).
-
-    Raises:
-        ScenarioError: the new layout is invalid (an obstacle covering a goal, a degenerate
-            polygon, …), naming the key.
-    """
-    obstacles = list(scenario.layout.obstacles)
-    for v, value in zip(varied, theta, strict=True):
-        region = obstacles[v.obstacle]
-        array = np.array(getattr(region, v.field), np.float64)
-        array[v.index] = float(value)
-        kw: dict[str, Any] = {f: getattr(region, f) for f in _FIELDS[region.kind]}
-        kw[v.field] = float(array) if v.field == "radius" else array
-        try:
-            obstacles[v.obstacle] = Region(region.kind, **kw)
-        except Problem as p:
-            raise ScenarioError(f"{scenario.source}: {v.key}: {p.detail}") from None
-    layout = Layout(tuple(obstacles), scenario.layout.walls, scenario.layout.walkable)
-    try:
-        return dataclasses.replace(scenario, layout=layout)
-    except Problem as p:
-        raise ScenarioError(f"{scenario.source}: {p.key}: {p.detail}") from None
 
 
 # ------------------------------------------------------------------------------ geometry
@@ -571,102 +448,3 @@ def value_and_gradient(
     (value, overflow), grad = _value_and_grad(jnp.asarray(x, problem.peds.speed.dtype), setup)
     _checked(problem, x, overflow)
     return float(value), np.asarray(grad, np.float64)
-
-
-# ------------------------------------------------------------------------------ the optimiser
-
-
-@dataclass(frozen=True)
-class OptimizeResult:
-    """What :func:`projected_gradient` found.
-
-    Attributes:
-        x: the best point evaluated (``θ``).
-        value: the objective there.
-        gradient: its gradient there.
-        path: every point evaluated and its value, in order.
-        evaluations: calls of the value-and-gradient function.
-        iterations: accepted steps.
-        message: why it stopped.
-    """
-
-    x: np.ndarray
-    value: float
-    gradient: np.ndarray
-    path: tuple[tuple[np.ndarray, float], ...]
-    evaluations: int
-    iterations: int
-    message: str
-
-
-def projected_gradient(
-    fun: Callable[[np.ndarray], tuple[float, np.ndarray]],
-    x0: Sequence[float] | np.ndarray,
-    lower: Sequence[float] | np.ndarray,
-    upper: Sequence[float] | np.ndarray,
-    *,
-    max_evaluations: int = 8,
-    tol: float = 1e-2,
-    first_step: float = 0.25,
-    longest_step: float = 0.5,
-    shrink: float = 0.3,
-) -> OptimizeResult:
-    """Minimise ``fun`` (``x → (value, gradient)``) over the box ``lower ≤ x ≤ upper``.
-
-    Descent along the gradient's direction projected on the box, in coordinates scaled to the
-    unit box (``u = (x − lower)/(upper − lower)``): the trial point is
-    ``clip(u − h g/‖g‖_∞, 0, 1)``, so the step length ``h`` is in box units (``first_step`` at
-    first) and the gradient's magnitude is not used — in a jam it is off by many orders
-    (module docstring) while its direction may still say where to look. A trial that lowers
-    the value is kept and the next step is twice as long (at most ``longest_step``); one that
-    does not is dropped and ``h`` multiplied by ``shrink``. Each trial calls ``fun`` once,
-    except one within ``tol`` of a point already evaluated (it shrinks ``h`` at once).
-
-    Stops when the projected step is shorter than ``tol`` (box units), when the gradient is not
-    finite, or after ``max_evaluations`` calls; returns the best point seen.
-
-    Raises:
-        JcrowdError: bounds with ``lower ≥ upper``, a start outside them, or a budget below 1.
-    """
-    lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
-    x = np.asarray(x0, np.float64)
-    if not (lo.shape == hi.shape == x.shape and np.all(lo < hi)):
-        raise JcrowdError(f"optimiser: expected lower < upper of one shape, found {lo} and {hi}")
-    if not np.all((lo <= x) & (x <= hi)):
-        raise JcrowdError(f"optimiser: expected a start within [{lo}, {hi}], found {x}")
-    if max_evaluations < 1:
-        raise JcrowdError(
-            f"optimiser: expected a budget of ≥ 1 evaluation, found {max_evaluations}"
-        )
-    span = hi - lo
-    u = (x - lo) / span
-    value, grad = fun(x)
-    g = np.asarray(grad, np.float64) * span  # the gradient in box units
-    path = [(x.copy(), float(value))]
-    best = (x.copy(), float(value), np.asarray(grad, np.float64))
-    evaluations, iterations, message = 1, 0, f"stopped after {max_evaluations} evaluations"
-    step = first_step
-    while evaluations < max_evaluations:
-        if not np.all(np.isfinite(g)):
-            message = "stopped: the gradient is not finite (a jam? module docstring)"
-            break
-        gmax = float(np.max(np.abs(g)))
-        trial = np.clip(u - step * g / gmax, 0.0, 1.0) if gmax > 0 else u
-        if float(np.max(np.abs(trial - u))) < tol:
-            message = f"converged: projected step below {tol:g} of the box"
-            break
-        xt = lo + trial * span
-        if any(np.max(np.abs(xt - p) / span) < tol for p, _ in path):
-            step *= shrink  # evaluated already (and not kept): a shorter step, no call
-            continue
-        vt, gt = fun(xt)
-        evaluations += 1
-        path.append((xt.copy(), float(vt)))
-        if np.isfinite(vt) and vt < value:
-            best = (xt.copy(), float(vt), np.asarray(gt, np.float64))
-            u, value, g = trial, float(vt), np.asarray(gt, np.float64) * span
-            step = min(2.0 * step, longest_step)
-            iterations += 1
-        else:
-            step *= shrink
-    return OptimizeResult(best[0], best[1], best[2], tuple(path), evaluations, iterations, message)
