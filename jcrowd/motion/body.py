@@ -6,10 +6,10 @@ a motion model's skeleton (:func:`bind_body`) takes three steps.
 
 1. **Names** (:func:`map_bones`). Every rig bone belongs to a *part* (``spine``, ``left_thigh``,
    …); a skeleton joint belongs to the part its name says under any convention in
-   :data:`PART_NAMES` (CMU MotionBuilder ``LeftUpLeg``, CMU ASF ``lfemur``, Mixamo
-   ``mixamorig:LeftUpLeg``, Unreal ``thigh_l``, …; case, separators and a ``prefix:`` ignored;
-   right-side names are the left ones mirrored). Within a part, joints and bones are paired in
-   chain order by rest position
+   :data:`~jcrowd.motion.body_parts.PART_NAMES` (CMU MotionBuilder ``LeftUpLeg``, CMU ASF
+   ``lfemur``, Mixamo ``mixamorig:LeftUpLeg``, Unreal ``thigh_l``, …; case, separators and a
+   ``prefix:`` ignored; right-side names are the left ones mirrored). Within a part, joints and
+   bones are paired in chain order by rest position
    (relative to the root, the rig scaled by the ratio of the two legs' heights): a skeleton
    with one spine joint where the rig has three takes the one nearest to it. Reading taken: a
    name says which part of the body a joint moves, and the rest pose says where in that part it
@@ -38,13 +38,13 @@ Skinning, the per-level weights and finding joint frames in the step's points ar
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 
 import numpy as np
 from jaxtyping import Float, Int
 
 from jcrowd.errors import SkinError
+from jcrowd.motion.body_parts import ALL_PARTS, PART_NAMES, REQUIRED_PARTS, part_of_joint
 from jcrowd.motion.skeleton import Skeleton, rest_positions
 
 __all__ = [
@@ -65,130 +65,6 @@ INFLUENCES = 4
 """Joints per vertex."""
 
 _AXIAL_CLAMP = (0.6, 1.6)
-
-# Part of the body → rig bone names (CMU MotionBuilder, the shipped rig) and the joint names
-# other conventions use for it, left side; right-side entries are made by mirroring.
-PART_NAMES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "pelvis": (("Hips",), ("hips", "pelvis", "root", "hip")),
-    "left_hip": (("LHipJoint",), ("lhipjoint", "lefthipjoint")),
-    "left_thigh": (
-        ("LeftUpLeg",),
-        ("leftupleg", "lfemur", "leftthigh", "thighl", "lthigh", "leftupperleg", "upperlegl"),
-    ),
-    "left_shin": (
-        ("LeftLeg",),
-        (
-            "leftleg",
-            "ltibia",
-            "leftshin",
-            "calfl",
-            "lshin",
-            "leftlowerleg",
-            "lowerlegl",
-            "leftknee",
-        ),
-    ),
-    "left_foot": (("LeftFoot",), ("leftfoot", "lfoot", "footl", "leftankle")),
-    "left_toes": (("LeftToeBase",), ("lefttoebase", "ltoes", "lefttoe", "balll", "toesl", "ltoe")),
-    "spine": (
-        ("LowerBack", "Spine", "Spine1"),
-        (
-            "lowerback",
-            "upperback",
-            "spine",
-            "spine1",
-            "spine2",
-            "spine3",
-            "thorax",
-            "chest",
-            "abdomen",
-            "torso",
-            "spine01",
-            "spine02",
-            "spine03",
-            "upperchest",
-        ),
-    ),
-    "head": (
-        ("Neck", "Neck1", "Head"),
-        ("neck", "neck1", "lowerneck", "upperneck", "neck01", "head"),
-    ),
-    "left_collar": (("LeftShoulder",), ("leftshoulder", "lclavicle", "claviclel", "leftcollar")),
-    "left_upper_arm": (
-        ("LeftArm",),
-        ("leftarm", "lhumerus", "upperarml", "leftupperarm", "lshoulder", "luparm"),
-    ),
-    "left_forearm": (
-        ("LeftForeArm",),
-        ("leftforearm", "lradius", "lowerarml", "leftlowerarm", "lforearm", "leftelbow"),
-    ),
-    "left_hand": (
-        ("LeftHand", "LeftFingerBase"),
-        ("lefthand", "lwrist", "lhand", "handl", "leftwrist", "leftfingerbase"),
-    ),
-    "left_fingers": (
-        ("LeftHandFinger1",),
-        ("lefthandindex1", "lfingers", "lefthandfinger1", "indexl", "lindex"),
-    ),
-    "left_thumb": (("LThumb",), ("lthumb", "lefthandthumb1", "thumbl", "leftthumb")),
-}
-
-REQUIRED_PARTS = (
-    "pelvis",
-    "left_thigh",
-    "left_shin",
-    "left_foot",
-    "right_thigh",
-    "right_shin",
-    "right_foot",
-    "left_upper_arm",
-    "left_forearm",
-    "right_upper_arm",
-    "right_forearm",
-    "head",
-)
-"""Parts a skeleton must have for a body to follow it."""
-
-
-def _mirror(name: str) -> str:
-    """A left-side name turned right (``Left…``, ``L…``, ``l…``, ``…l``)."""
-    if name.startswith("Left"):
-        return "Right" + name[4:]
-    if name.startswith("left"):
-        return "right" + name[4:]
-    if name.startswith("L") and name[1:2].isupper():
-        return "R" + name[1:]
-    if name.startswith("l"):
-        return "r" + name[1:]
-    if name.endswith("l"):
-        return name[:-1] + "r"
-    return name
-
-
-def _parts() -> dict[str, tuple[tuple[str, ...], tuple[str, ...]]]:
-    out: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {}
-    for part, (bones, names) in PART_NAMES.items():
-        out[part] = (bones, names)
-        if part.startswith("left_"):
-            right = "right_" + part[5:]
-            out[right] = (tuple(_mirror(b) for b in bones), tuple(_mirror(n) for n in names))
-    return out
-
-
-_ALL_PARTS = _parts()
-
-
-def _normal_name(name: str) -> str:
-    """Lower case, a ``prefix:`` and separators dropped."""
-    return re.sub(r"[^a-z0-9]", "", name.split(":")[-1].lower())
-
-
-def _part_of_joint(name: str) -> str | None:
-    n = _normal_name(name)
-    for part, (_, names) in _ALL_PARTS.items():
-        if n in names:
-            return part
-    return None
 
 
 @dataclass(frozen=True)
@@ -276,11 +152,11 @@ def map_bones(body: Body, skeleton: Skeleton) -> Int[np.ndarray, " B"]:
     rel_b = (heads - heads[0]) * _leg_ratio(joints, heads)
     by_part: dict[str, list[int]] = {}
     for j, name in enumerate(skeleton.names):
-        part = _part_of_joint(name)
+        part = part_of_joint(name)
         if part is not None:
             by_part.setdefault(part, []).append(j)
     out = np.full(len(body.bones), -1, np.int64)
-    for part, (bone_names, _) in _ALL_PARTS.items():
+    for part, (bone_names, _) in ALL_PARTS.items():
         cand = by_part.get(part, [])
         bones = [body.bones.index(b) for b in bone_names if b in body.bones]
         cand = list(cand)
@@ -289,14 +165,14 @@ def map_bones(body: Body, skeleton: Skeleton) -> Int[np.ndarray, " B"]:
         for k, m in _monotone_pairs(cost):
             out[bones[m]] = cand[k]
     found = {
-        p for p, (names, _) in _ALL_PARTS.items() for b in names if out[body.bones.index(b)] >= 0
+        p for p, (names, _) in ALL_PARTS.items() for b in names if out[body.bones.index(b)] >= 0
     }
     missing = [p for p in REQUIRED_PARTS if p not in found]
     if missing:
         raise SkinError(
             f"body: could not map the parts {missing} onto the skeleton's joints "
             f"{list(skeleton.names)}; expected joint names like {_examples(missing)} "
-            "(jcrowd.motion.body.PART_NAMES lists the conventions understood)"
+            "(jcrowd.motion.body_parts.PART_NAMES lists the conventions understood)"
         )
     return out
 
@@ -335,7 +211,7 @@ def _monotone_pairs(cost: np.ndarray) -> list[tuple[int, int]]:
 
 
 def _examples(parts: list[str]) -> list[str]:
-    return [f"{_ALL_PARTS[p][0][0]}/{_ALL_PARTS[p][1][-1]}" for p in parts]
+    return [f"{ALL_PARTS[p][0][0]}/{ALL_PARTS[p][1][-1]}" for p in parts]
 
 
 def _owner(body: Body, joint_of_bone: np.ndarray) -> np.ndarray:
@@ -370,7 +246,7 @@ def _yaw_matrix(forward_from: np.ndarray, forward_to: np.ndarray) -> np.ndarray:
 
 
 def _part_of_bone(name: str) -> str:
-    return next(p for p, (bones, _) in _ALL_PARTS.items() if name in bones)
+    return next(p for p, (bones, _) in ALL_PARTS.items() if name in bones)
 
 
 def _chain_child(body: Body, joint_of_bone: np.ndarray, b: int) -> int:
@@ -411,7 +287,7 @@ def bind_body(body: Body, skeleton: Skeleton, forward: np.ndarray | None = None)
     heads = heads @ turn.T
 
     def part_bone(part: str) -> int:
-        return body.bones.index(_ALL_PARTS[part][0][0])
+        return body.bones.index(ALL_PARTS[part][0][0])
 
     pelvis, foot = part_bone("pelvis"), part_bone("left_foot")
     sk = rest

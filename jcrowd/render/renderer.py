@@ -39,6 +39,7 @@ from jcrowd.render.bodies import (
     stage_bodies,
 )
 from jcrowd.render.camera import View, projection_matrix, view_matrix
+from jcrowd.render.capsules import CapsuleLevel, stage_capsules
 from jcrowd.render.context import check_gl, gl_renderer, make_context
 from jcrowd.render.levels import LevelInstances, LevelMesh
 from jcrowd.render.meshes import (
@@ -59,42 +60,7 @@ _LIGHT_DIR = np.array([0.35, 0.85, 0.40]) / np.linalg.norm([0.35, 0.85, 0.40])  
 _AMBIENT = 0.40
 _GROUND = (0.74, 0.74, 0.70)
 _GRID_LINE = (0.52, 0.52, 0.50)
-_FLOATS_PER_BONE = 9  # start xyz, end xyz, colour rgb
 _ZENITH = (0.42, 0.60, 0.86)  # the sky overhead (sky=True); the horizon is the background
-
-
-class _Level:
-    """GL objects and the staging array of one level (internal)."""
-
-    def __init__(
-        self,
-        ctx: moderngl.Context,
-        prog: moderngl.Program,
-        mesh: LevelMesh,
-        capacity: int,
-        geometry: tuple[moderngl.Buffer, moderngl.Buffer],
-    ) -> None:
-        self.mesh = mesh
-        self.capacity = capacity
-        self.parent_idx, self.joint_idx = mesh.bones
-        self.num_bones = len(self.joint_idx)
-        self.staging = np.zeros((capacity, self.num_bones, _FLOATS_PER_BONE), np.float32)
-        vbo, ibo = geometry
-        self.instances = ctx.buffer(reserve=max(self.staging.nbytes, 4))
-        self.vao = ctx.vertex_array(
-            prog,
-            [
-                (vbo, "3f 1f", "in_offset", "in_end"),
-                (self.instances, "3f 3f 3f/i", "a_start", "a_end", "a_color"),
-            ],
-            index_buffer=ibo,
-            index_element_size=4,
-        )
-
-    def release(self) -> None:
-        """Free this level's vertex array and instance buffer."""
-        self.vao.release()
-        self.instances.release()
 
 
 class CrowdRenderer:
@@ -182,7 +148,7 @@ class CrowdRenderer:
         self.ctx = make_context() if ctx is None else ctx
         self._released = False
         self._objects: list[Any] = []
-        self._levels: list[_Level | BodyLevel] = []
+        self._levels: list[CapsuleLevel | BodyLevel] = []
         try:
             self._build(meshes, caps, details)
         except BaseException:
@@ -238,7 +204,7 @@ class CrowdRenderer:
                 vbo, ibo = ctx.buffer(vertices.tobytes()), ctx.buffer(triangles.tobytes())
                 self._objects += [vbo, ibo]
                 geometries[detail] = (vbo, ibo)
-            self._levels.append(_Level(ctx, self._capsule, mesh, cap, geometries[detail]))
+            self._levels.append(CapsuleLevel(ctx, self._capsule, mesh, cap, geometries[detail]))
         ground_vbo = ctx.buffer(ground_mesh(self.ground_size).tobytes())
         self._objects.append(ground_vbo)
         self._ground_vao = ctx.vertex_array(self._ground_prog, [(ground_vbo, "3f", "in_position")])
@@ -301,7 +267,7 @@ class CrowdRenderer:
         counts = [
             stage_bodies(level, data, i, view_proj, self.height)
             if isinstance(level, BodyLevel)
-            else _stage(level, data, i)
+            else stage_capsules(level, data, i)
             for i, (level, data) in enumerate(zip(self._levels, levels, strict=True))
         ]
         vp_bytes = view_proj.T.astype(np.float32).tobytes()  # GL wants column-major
@@ -415,45 +381,6 @@ def _uniform(prog: moderngl.Program, name: str) -> moderngl.Uniform:
     if not isinstance(member, moderngl.Uniform):
         raise RenderError(f"shader program has no uniform {name!r} (found {member!r})")
     return member
-
-
-def _stage(level: _Level, data: LevelInstances, index: int) -> int:
-    """Check one level's input and gather its valid agents' bones into ``level.staging``.
-
-    Returns the number of valid agents staged.
-    """
-    where = f"CrowdRenderer.render: level {index}"
-    joints = np.asarray(data.joints)
-    valid = np.asarray(data.valid)
-    colors = np.asarray(data.colors)
-    c, j = joints.shape[0] if joints.ndim else 0, level.mesh.num_joints
-    if joints.shape != (c, j, 3):
-        raise RenderError(f"{where}: expected joints of shape (C, {j}, 3), found {joints.shape}")
-    if c > level.capacity:
-        raise RenderError(f"{where}: {c} slots passed, capacity is {level.capacity}")
-    if valid.shape != (c,) or valid.dtype != np.bool_:
-        raise RenderError(
-            f"{where}: expected valid of shape ({c},) bool, found {valid.shape} {valid.dtype}"
-        )
-    if colors.shape != (c, 3):
-        raise RenderError(f"{where}: expected colors of shape ({c}, 3), found {colors.shape}")
-    rows = np.flatnonzero(valid)
-    n = len(rows)
-    if n == 0 or level.num_bones == 0:
-        return n
-    # Only valid slots are checked: padding slots may hold anything (e.g. stale or NaN poses).
-    picked = joints[rows].astype(np.float32, copy=False)
-    picked_colors = colors[rows].astype(np.float32, copy=False)
-    if not np.all(np.isfinite(picked)):
-        bad = int(rows[np.flatnonzero(~np.isfinite(picked).all(axis=(1, 2)))[0]])
-        raise RenderError(f"{where}: non-finite joint positions in valid slot {bad}")
-    if not np.all(np.isfinite(picked_colors)):
-        raise RenderError(f"{where}: non-finite colours in a valid slot")
-    out = level.staging[:n]
-    out[:, :, 0:3] = picked[:, level.parent_idx]
-    out[:, :, 3:6] = picked[:, level.joint_idx]
-    out[:, :, 6:9] = picked_colors[:, None, :]
-    return n
 
 
 def _check_args(
