@@ -74,6 +74,12 @@ def cmu16_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
+def hermes_dir() -> Path:
+    """``.../data/pedestrians/hermes_uo`` (HERMES corridor runs, cm, 16 fps, steady_state.csv)."""
+    return _need("pedestrians/hermes_uo")
+
+
+@pytest.fixture(scope="session")
 def cmu16_tensor(cmu16_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Any:
     """The default tensor fit of ``cmu16`` (about 35 s: the per-level refit), built once per
     test run and shared by the files that only read it.

@@ -225,3 +225,38 @@ def test_bad_names_and_starts_are_errors(synthetic_batch) -> None:
         calibrate([batch], {"time_gap": -0.5})
     with pytest.raises(JcrowdError, match="whole frames"):
         make_windows(np.zeros((1, 4)), 16.0, (0, 100), 1.8, 1.8, horizon_s=0.3)
+
+
+# ------------------------------------------------------------------------------ the command
+
+
+@pytest.mark.slow
+def test_cli_fits_one_run_and_writes_a_file_a_scenario_takes(
+    hermes_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``jcrowd calibrate RUN --fit time_gap --json`` on one measured run (a few LM steps):
+    one JSON object with the keys its docstring names, the residual lowered from the ×1.3
+    start, and a parameters file a scenario reads back to the printed value."""
+    from jcrowd.cli import main
+
+    run, out = hermes_dir / "uo-100-180-180.txt", tmp_path / "p.toml"
+    argv = ["calibrate", str(run), "--fit", "time_gap", "--start", "time_gap=0.78"]
+    code = main([*argv, "--max-steps", "4", "--out", str(out), "--json"])
+    result = json.loads(capsys.readouterr().out)
+    assert code == 0
+    keys = {"data", "windows", "names", "start", "fitted", "residual_rms_start_m_s"}
+    assert keys | {"residual_rms_m_s", "steps", "singular_values", "seconds"} <= set(result)
+    assert result["data"] == ["uo-100-180-180"] and result["names"] == ["time_gap"]
+    assert result["start"] == {"time_gap": 0.78}
+    # Four LM steps from T = 0.78 s on this run's 19 windows: measured 0.48 -> 0.13 m/s.
+    assert result["residual_rms_m_s"] < 0.8 * result["residual_rms_start_m_s"], result
+    fitted = result["fitted"]["time_gap"]
+    assert 0.05 < fitted < 0.78
+    sc = parse_scenario(_SCENARIO.format(params=out.name), "s.toml", base_dir=tmp_path)
+    assert dict(sc.dynamics.avoidance) == {"time_gap": pytest.approx(fitted)}
+    # A run that is not there: a clear error naming it, nothing written.
+    missing = tmp_path / "uo-999-180-180.txt"
+    code = main(["calibrate", str(missing), "--out", str(tmp_path / "q.toml"), "--json"])
+    err = json.loads(capsys.readouterr().out)
+    assert code != 0 and "uo-999-180-180" in err["error"]["message"]
+    assert not (tmp_path / "q.toml").exists()
