@@ -3,7 +3,7 @@ item 2).
 
 - **Fit**: :func:`jcrowd.crowd.calibrate.calibrate` (short windows from the measured states,
   Levenberg–Marquardt on the logarithms) from three starts: every fitted parameter ×1.3, ×0.7,
-  and alternately ×1.3 / ×0.7 of the model's default (``--names``).
+  and alternately ×1.3 / ×0.7 of the model's default (``--names``; ×1.15 third for one name).
 - **Judge**: each fit's parameters run the crowd-dynamics bench's fundamental-diagram section
   (``bench/pedestrians.py``: each run re-simulated from its measured entry times, PedPy's
   Voronoi speed in the measurement area over the steady state) and give its
@@ -12,7 +12,7 @@ item 2).
 - Done-when: every fit's RMSE ≤ the defaults', and each fitted parameter within ±10 % of the
   three fits' median.
 
-``python bench/calibrate.py [--names time_gap,desired_speed] [--horizon 0.5] [--json]
+``python bench/calibrate.py [--names time_gap] [--horizon 0.5] [--json]
 [--no-record]``
 """
 
@@ -80,7 +80,7 @@ def per_run_bias(runs, names, defaults, fitted, horizon):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hermes", default=str(ped.DATA / "hermes_uo"))
-    ap.add_argument("--names", default="time_gap,desired_speed")
+    ap.add_argument("--names", default="time_gap")
     ap.add_argument("--horizon", type=float, default=0.5)
     ap.add_argument("--max-steps", type=int, default=40)
     ap.add_argument("--json", action="store_true")

@@ -260,3 +260,13 @@ def test_cli_fits_one_run_and_writes_a_file_a_scenario_takes(
     err = json.loads(capsys.readouterr().out)
     assert code != 0 and "uo-999-180-180" in err["error"]["message"]
     assert not (tmp_path / "q.toml").exists()
+
+
+def test_the_commands_default_fit_is_the_modules() -> None:
+    """The parser keeps its own copy (it must not import jax): the two cannot drift."""
+    from jcrowd.cli import _build_parser
+    from jcrowd.crowd.calibrate import DEFAULT_NAMES
+
+    parser, _ = _build_parser()
+    args = parser.parse_args(["calibrate", "run.txt"])
+    assert tuple(args.fit.split(",")) == DEFAULT_NAMES

@@ -254,7 +254,7 @@ def test_gradient_matches_central_differences_of_the_forward_objective() -> None
     objectives. Not checked here: the east piece's x (KEYS[1]), whose gradient was 0.074 against
     0.105 by central differences (travel time; that piece meets the room's east wall, a corner
     split as jcrowd.crowd.rollout's walls test describes, not investigated further). Relative
-    error ≤ 1e-2 (the issue's bound) for travel time and flow; 3e-2 for the evacuation time,
+    error ≤ 1e-2 (the issue's bound) for travel time; 3e-2 for the evacuation time,
     measured 1.8e-2 off (its soft maximum weights the last few agents; cause not found);
     truncation ~h² and rounding ~1e-16/h are far below it, and with 8 people and no queue no
     switch of the hard structure falls within ±h here (checked by the agreement itself).

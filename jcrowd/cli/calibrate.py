@@ -6,10 +6,11 @@ come from ``steady_state.csv`` beside it (the whole run where it is not listed).
 :func:`jcrowd.crowd.calibrate.calibrate`: Levenberg–Marquardt through short differentiable
 rollouts from the measured states (that module's docstring says what is compared and why).
 
-``--fit`` names the parameters (default ``time_gap,plain_reaction_time,desired_speed``; any
-field of :class:`~jcrowd.crowd.avoidance.AvoidanceParams`), ``--start NAME=VALUE`` moves a
-start value from the model's default. The fitted values are written (atomically) to ``--out``
-as TOML: ``[avoidance]`` (what a scenario's ``[dynamics] params = "params.toml"`` sets),
+``--fit`` names the parameters (default ``time_gap``, as
+:data:`jcrowd.crowd.calibrate.DEFAULT_NAMES`, whose module says why; any field of
+:class:`~jcrowd.crowd.avoidance.AvoidanceParams` or ``desired_speed``), ``--start NAME=VALUE``
+moves a start value from the model's default. The fitted values are written (atomically) to
+``--out`` as TOML: ``[avoidance]`` (what a scenario's ``[dynamics] params = "params.toml"`` sets),
 ``[population]`` (the fitted free speed: set your groups' ``speed`` to it to walk like the
 measured people) and ``[calibration]`` (the runs, the start, the residuals). ``--json`` prints
 one object: the start and fitted values, the residual RMS before and after, the steps, the
@@ -36,7 +37,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--out", default="params.toml", help="parameters file to write (TOML)")
     p.add_argument(
         "--fit",
-        default="time_gap,plain_reaction_time,desired_speed",
+        default="time_gap",  # jcrowd.crowd.calibrate.DEFAULT_NAMES (the parser loads no jax)
         help="comma-separated parameters to fit",
     )
     p.add_argument(

@@ -16,27 +16,37 @@ Readings taken, and why:
   microscopic models (a prediction from the measured state, not a free run), and it keeps the
   derivative meaningful: at 1.5 s (45 steps) the Jacobian reached 10³–10⁴ in the densest runs
   (``uo-050-070-070``; 10² in ``uo-050-180-180``), at 0.5 s it stays bounded.
-- **What it does not achieve (measured).** Fitting ``time_gap`` and ``desired_speed`` on the six
-  HERMES runs from three starts converges to one point (within 0.1 %), but that point's
-  free-run fundamental diagram is further from the measurement than the hand-chosen
-  defaults' (``bench/calibrate.py``: speed RMSE 0.158–0.183 m/s against 0.138). Half a second
-  from a measured state mostly measures the free speed; the free run's density, which sets
-  its speed, is not in the residual. Adding ``plain_reaction_time`` at 0.5 s is degenerate
-  (``T`` → 0.005 s, ``τ`` → 1.4 s absorb the start's mismatch).
+- **What it does not achieve (measured).** The fitted ``time_gap`` does not lower the free
+  run's fundamental-diagram speed error below the hand-chosen defaults' (``bench/calibrate.py``,
+  0.138 m/s): ``time_gap`` alone from three starts gives 0.276–0.281 s (1.7 % apart) and
+  0.136–0.141 m/s; with ``desired_speed`` too, 0.305 s and 1.459 m/s and 0.158–0.183 m/s (the
+  free run is chaotic: fits 2 % apart move it by ±0.005 m/s). The windows and the fundamental
+  diagram want different things of ``T``. From the measured states, the model at the default
+  ``T`` = 0.6 s walks slower than the people in every run (mean window residual −0.15 to
+  −0.37 m/s; at 0.3 s, −0.14 to +0.09): that is where the fit goes. In a free run a short ``T``
+  lets the corridor carry the measured inflow at a lower density and a higher speed than
+  measured — ``uo-180-180-180``, which has no bottleneck, was congested (1.68 /m² at
+  0.96 m/s) and the model carries the same ~1.6 /m/s at 1.35 /m² and 1.21 m/s with
+  ``T`` = 0.305 s — so the per-run speed error there grows as ``T`` falls, while in the
+  bottleneck runs it shrinks. On a grid (``v0`` = 1.34 m/s), the fundamental diagram is best
+  near ``T`` = 0.5 s (0.117 m/s), where the windows' mean residual is −0.12 to −0.29 m/s. A
+  1.0 s horizon does not help: its Jacobian reached 3.3·10³ and Levenberg–Marquardt stayed at
+  its start. Fitting ``desired_speed`` moves it to 1.46 m/s, faster than the free-flow runs'
+  measured 1.34–1.39 m/s; adding ``plain_reaction_time`` is degenerate (``T`` → 0.005 s,
+  ``τ`` → 1.4 s absorb the start's mismatch).
 - **What is compared.** Per window, the mean speed over the horizon (displacement ÷
   ``horizon_s``) of the people who start in the run's measurement area, simulated minus
   measured: one residual per window, in m/s. The fundamental diagram the result is judged by
   (``bench/pedestrians.py``'s ``fd_speed_rmse_m_s``) is PedPy's speed in that area, so the fit
   targets the same people and the same quantity on a shorter time scale. Windows where nobody
   starts in the area count zero.
-- **What is fitted.** By default ``time_gap`` (``T``, how far ahead people keep their spacing),
-  ``plain_reaction_time`` (how fast the velocity follows the desired one) and
-  ``desired_speed`` (``v0``, the population's free speed): the three the residuals are
-  sensitive to. The repulsion's ``strength``/``range``, ``wall_strength`` and ``anisotropy``
-  move the residuals by less than 1 % of the fitted ones' effect (their columns of the
-  Jacobian, measured at the defaults: ``bench/calibrate.py`` prints the singular values); a
-  fit of them is set by noise and would not be stable across starts, so they stay at their
-  defaults unless asked for (``names``). Parameters are fitted as logarithms (each stays
+- **What is fitted.** By default ``time_gap`` (``T``, how far ahead people keep their
+  spacing) alone: the windows fix it well (one optimum from every start), while ``v0`` comes
+  out biased and the reaction time degenerate (above). Any field of
+  :class:`~jcrowd.crowd.avoidance.AvoidanceParams` and ``desired_speed`` (``v0``) may be
+  named. The repulsion's ``strength``/``range``, ``wall_strength`` and ``anisotropy`` move the
+  residuals by less than 1 % of ``T``'s effect (their columns of the Jacobian at the
+  defaults); a fit of them is set by noise. Parameters are fitted as logarithms (each stays
   positive; a step is relative).
 - **Structure held by the forward pass.** As in every rollout, who is the nearest neighbour
   ahead is decided by the forward pass and carries no gradient (:mod:`jcrowd.crowd.rollout`).
@@ -79,7 +89,7 @@ __all__ = [
     "window_residuals",
 ]
 
-DEFAULT_NAMES = ("time_gap", "plain_reaction_time", "desired_speed")
+DEFAULT_NAMES = ("time_gap",)
 """The parameters fitted by default (module docstring)."""
 
 SPEED_NAME = "desired_speed"
