@@ -63,12 +63,12 @@ def fd_rmse(folder, params, speed):
     return float(np.sqrt(np.mean(err**2))), rows
 
 
-def per_run_bias(runs, names, defaults, fitted, horizon):
-    """Per run: the mean window residual (simulated − measured speed, m/s) at the defaults and
-    at ``fitted``: where the windows want the model faster (−) or slower (+)."""
+def per_run_bias(runs, per_run, names, defaults, fitted):
+    """Per run (its windows in ``per_run``): the mean window residual (simulated − measured
+    speed, m/s) at the defaults and at ``fitted``: where the windows want the model faster (−)
+    or slower (+)."""
     out = {}
-    for r in runs:
-        batch, _ = make_windows(r.rows, r.fps, r.steady, r.corridor_m, r.exit_m, horizon_s=horizon)
+    for r, batch in zip(runs, per_run, strict=True):
         at = {}
         for key, vals in (("default", defaults), ("fitted", fitted)):
             v = jnp.asarray([vals[n] for n in names], jnp.float32)
@@ -97,12 +97,11 @@ def main() -> None:
     if len(names) == 1:
         factors[2] = [1.15]  # one parameter has two ±30 % starts; the third lies between
     runs = load_hermes_runs([args.hermes])
-    batches = merge_windows(
-        [
-            make_windows(r.rows, r.fps, r.steady, r.corridor_m, r.exit_m, horizon_s=args.horizon)[0]
-            for r in runs
-        ]
-    )
+    per_run = [
+        make_windows(r.rows, r.fps, r.steady, r.corridor_m, r.exit_m, horizon_s=args.horizon)[0]
+        for r in runs
+    ]
+    batches = merge_windows(per_run)
     folder = Path(args.hermes)
     t0 = time.perf_counter()
     rmse_default, rows_default = fd_rmse(folder, defaults, ped.SPEED)
@@ -136,7 +135,7 @@ def main() -> None:
         print(f"fit {fits[-1]}", file=sys.stderr, flush=True)
     med = {n: float(np.median([f["fitted"][n] for f in fits])) for n in names}
     spread = max(abs(f["fitted"][n] / med[n] - 1) for f in fits for n in names)
-    bias = per_run_bias(runs, names, base, med, args.horizon)
+    bias = per_run_bias(runs, per_run, names, base, med)
     out = {
         "names": list(names),
         "horizon_s": args.horizon,

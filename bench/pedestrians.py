@@ -81,6 +81,7 @@ from jcrowd.crowd import (
     pedestrian_step,
     split_pedestrian_step,
 )
+from jcrowd.crowd.calibrate import corridor_scene
 
 DATA = ROOT.parent / "shared" / "data" / "pedestrians"
 DT = 1.0 / 30.0
@@ -390,34 +391,15 @@ def _entrance_density(pos, alive, area, times):
 # ------------------------------------------------------------------------------ HERMES
 
 
-HERMES_AREA = shapely.Polygon(
-    [
-        (2.8, -6.5),
-        (2.8, -4),
-        (1.8, -4),
-        (1.8, 4),
-        (2.8, 4),
-        (2.8, 8),
-        (-1, 8),
-        (-1, 4),
-        (0, 4),
-        (0, -4),
-        (-1, -4),
-        (-1, -6.5),
-    ]
-)
+HERMES_AREA = corridor_scene(1.8, 1.8)[0]
+"""The HERMES corridor (1.8 m) with its rooms: jcrowd.crowd.calibrate's scene, no exit wall."""
 HERMES_FPS = 16.0
 
 
 def hermes_scene(exit_cm):
-    b = exit_cm / 100.0
-    area = HERMES_AREA
-    if b < 1.8 - 1e-6:
-        wall = shapely.union(
-            shapely.box(-1.0, -4.2, 0.9 - b / 2, -4.0), shapely.box(0.9 + b / 2, -4.2, 2.8, -4.0)
-        )
-        area = area.difference(wall)
-    return area, shapely.box(-1.0, -6.5, 2.8, -6.0)
+    """The run's walkable area (an exit ``exit_cm`` wide in a wall at y = −4) and its target."""
+    area, target, _ = corridor_scene(1.8, exit_cm / 100.0)
+    return area, target
 
 
 FEED_Y = 3.8  # m: people enter the simulation 0.2 m inside the corridor's entrance (y = 4)
