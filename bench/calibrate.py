@@ -8,12 +8,13 @@ item 2).
   (``bench/pedestrians.py``: each run re-simulated from its measured entry times, PedPy's
   Voronoi speed in the measurement area over the steady state) and give its
   ``fd_speed_rmse_m_s``; the defaults' is measured in the same process. A fitted
-  ``desired_speed`` is every agent's free speed in that run.
+  ``desired_speed`` is every agent's free speed in that run, a fitted ``radius`` every agent's
+  body radius.
 - Done-when: every fit's RMSE ≤ the defaults', and each fitted parameter within ±10 % of the
   three fits' median.
 
-``python bench/calibrate.py [--names time_gap] [--horizon 0.5] [--json]
-[--no-record]``
+``python bench/calibrate.py [--names time_gap,radius] [--residual person|speed] [--horizon 0.5]
+[--max-steps 100] [--json] [--no-record]``
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ from common import machine, report
 
 from jcrowd.crowd.avoidance import AvoidanceParams
 from jcrowd.crowd.calibrate import (
+    EXTRA_NAMES,
+    RADIUS_NAME,
     SPEED_NAME,
     calibrate,
     make_windows,
@@ -42,8 +45,9 @@ from jcrowd.crowd.calibrate import (
 from jcrowd.io.trajectories import load_hermes_runs
 
 
-def fd_rmse(folder, params, speed):
-    """``fd_speed_rmse_m_s`` of jcrowd alone under ``params`` and free speed ``speed``."""
+def fd_rmse(folder, params, speed, radius=ped.RADIUS):
+    """``fd_speed_rmse_m_s`` of jcrowd alone under ``params``, free speed ``speed`` and body
+    radius ``radius``."""
     steady = pd.read_csv(folder / "steady_state.csv").set_index("run")
     rows = []
     for f in sorted(folder.glob("uo-*.txt")):
@@ -56,7 +60,9 @@ def fd_rmse(folder, params, speed):
         area, target = ped.hermes_scene(float(m.group(3)))
         measured = ped._fd_measure(d, ped.HERMES_FPS, steady.loc[f.stem], ped.HERMES_AREA)
         t_ref = d[:, 1].max() / ped.HERMES_FPS
-        p, a, _ = ped.run_jcrowd(area, target, spawn_xy, spawn_t, 3 * t_ref, speed, params=params)
+        p, a, _ = ped.run_jcrowd(
+            area, target, spawn_xy, spawn_t, 3 * t_ref, speed, radius=radius, params=params
+        )
         sim = ped._fd_measure_sim(p, a, steady.loc[f.stem], area)
         rows.append((f.stem, measured[1], sim[1], measured[0], sim[0]))
     err = np.array([r[2] - r[1] for r in rows])
@@ -80,15 +86,17 @@ def per_run_bias(runs, per_run, names, defaults, fitted):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hermes", default=str(ped.DATA / "hermes_uo"))
-    ap.add_argument("--names", default="time_gap")
+    ap.add_argument("--names", default="time_gap,radius")
     ap.add_argument("--horizon", type=float, default=0.5)
-    ap.add_argument("--max-steps", type=int, default=40)
+    ap.add_argument("--residual", default="person", choices=("person", "speed"))
+    ap.add_argument("--max-steps", type=int, default=100)
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--no-record", action="store_true")
     args = ap.parse_args()
     names = tuple(args.names.split(","))
     defaults = AvoidanceParams()
-    base = {n: (ped.SPEED if n == SPEED_NAME else float(getattr(defaults, n))) for n in names}
+    extra = {SPEED_NAME: ped.SPEED, RADIUS_NAME: ped.RADIUS}
+    base = {n: extra[n] if n in extra else float(getattr(defaults, n)) for n in names}
     factors = [
         [1.3] * len(names),
         [0.7] * len(names),
@@ -110,14 +118,19 @@ def main() -> None:
     for fac in factors:
         start = {n: base[n] * f for n, f in zip(names, fac, strict=True)}
         t1 = time.perf_counter()
-        cal = calibrate(batches, start, max_steps=args.max_steps)
+        cal = calibrate(batches, start, max_steps=args.max_steps, residual=args.residual)
         fit_s = time.perf_counter() - t1
         fitted = dict(zip(names, map(float, cal.values), strict=True))
         params = defaults
         for n, v in fitted.items():
-            if n != SPEED_NAME:
+            if n not in EXTRA_NAMES:
                 params = eqx.tree_at(lambda p, n=n: getattr(p, n), params, jnp.asarray(v))
-        rmse, rows = fd_rmse(folder, params, fitted.get(SPEED_NAME, ped.SPEED))
+        rmse, rows = fd_rmse(
+            folder,
+            params,
+            fitted.get(SPEED_NAME, ped.SPEED),
+            fitted.get(RADIUS_NAME, ped.RADIUS),
+        )
         fits.append(
             {
                 "start": {n: round(v, 4) for n, v in start.items()},
@@ -139,6 +152,7 @@ def main() -> None:
     out = {
         "names": list(names),
         "horizon_s": args.horizon,
+        "residual": args.residual,
         "windows": int(sum(b.position.shape[0] for b in batches)),
         "fd_speed_rmse_default_m_s": round(rmse_default, 3),
         "fd_measured_speeds": {r[0]: round(r[1], 3) for r in rows_default},
@@ -151,7 +165,8 @@ def main() -> None:
         "seconds": round(time.perf_counter() - t0, 1),
     }
     lines = [
-        f"names {', '.join(names)}; horizon {args.horizon} s; {out['windows']} windows; "
+        f"names {', '.join(names)}; {args.residual} residuals; horizon {args.horizon} s; "
+        f"{out['windows']} windows; "
         f"defaults' fd_speed_rmse {out['fd_speed_rmse_default_m_s']} m/s",
         "",
         "| start | fitted | window RMS (m/s) | LM steps | fd_speed_rmse (m/s) |",

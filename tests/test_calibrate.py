@@ -19,6 +19,7 @@ from jcrowd.crowd.calibrate import (
     corridor_scene,
     make_windows,
     merge_windows,
+    person_residuals,
     window_residuals,
 )
 from jcrowd.crowd.dynamics import Pedestrians, build_world, pedestrian_step
@@ -101,6 +102,31 @@ def test_a_scenario_takes_the_calibrated_parameters_and_refuses_bad_ones(tmp_pat
         StepConfig((1,), (), avoidance=(("time_gapp", 1.0),)).check(1)
 
 
+def test_a_fitted_radius_is_the_scenarios_unless_it_names_its_own(tmp_path: Path) -> None:
+    """A ``[body] radius`` (``jcrowd calibrate --fit time_gap,radius``) sets ``[dynamics]
+    radius``; a radius the scenario writes itself wins; bad ``[body]`` tables are refused."""
+    (tmp_path / "p.toml").write_text("[avoidance]\ntime_gap = 0.45\n[body]\nradius = 0.17\n")
+    sc = parse_scenario(_SCENARIO.format(params="p.toml"), "s.toml", base_dir=tmp_path)
+    assert sc.dynamics.radius == pytest.approx(0.17)
+    assert dict(sc.dynamics.avoidance) == {"time_gap": 0.45}
+    own = _SCENARIO.format(params="p.toml") + "radius = 0.25\n"
+    assert parse_scenario(own, "s.toml", base_dir=tmp_path).dynamics.radius == 0.25
+    (tmp_path / "none.toml").write_text("[avoidance]\ntime_gap = 0.45\n")
+    sc = parse_scenario(_SCENARIO.format(params="none.toml"), "s.toml", base_dir=tmp_path)
+    assert sc.dynamics.radius == 0.2
+    (tmp_path / "neg.toml").write_text("[avoidance]\ntime_gap = 0.45\n[body]\nradius = -1\n")
+    with pytest.raises(ScenarioError, match=r"body\.radius: expected a positive number"):
+        parse_scenario(_SCENARIO.format(params="neg.toml"), "s.toml", base_dir=tmp_path)
+    (tmp_path / "key.toml").write_text("[avoidance]\ntime_gap = 0.45\n[body]\nheight = 1.8\n")
+    with pytest.raises(ScenarioError, match=r"body: expected only radius, found keys \['height'\]"):
+        parse_scenario(_SCENARIO.format(params="key.toml"), "s.toml", base_dir=tmp_path)
+    (tmp_path / "big.toml").write_text("[avoidance]\ntime_gap = 0.45\n[body]\nradius = 0.9\n")
+    with pytest.raises(
+        ScenarioError, match=r"big.toml: body.radius: expected a radius in \[0.1, 0.4\]"
+    ):
+        parse_scenario(_SCENARIO.format(params="big.toml"), "s.toml", base_dir=tmp_path)
+
+
 # ------------------------------------------------------------------------------ windows
 
 
@@ -134,8 +160,8 @@ def _synthetic_run(params: AvoidanceParams, speed: float, people: int = 10, fram
     return np.asarray(rows, np.float64)
 
 
-def _loop_residuals(batch, params: AvoidanceParams, speed: float) -> np.ndarray:
-    """The residuals by hand: each window stepped in a Python loop, speeds in NumPy."""
+def _loop_ends(batch, params: AvoidanceParams, speed: float, radius: float = 0.2) -> np.ndarray:
+    """Every window stepped by hand in a Python loop: the end positions ``(W, N, 2)``."""
     out = []
     for w in range(batch.position.shape[0]):
         n = batch.position.shape[1]
@@ -144,19 +170,30 @@ def _loop_residuals(batch, params: AvoidanceParams, speed: float) -> np.ndarray:
             batch.position[w],
             jnp.zeros(n, jnp.int32),
             jnp.full(n, speed, jnp.float32),
-            jnp.full(n, 0.2, jnp.float32),
+            jnp.full(n, radius, jnp.float32),
             alive,
             jnp.where(alive[:, None], batch.velocity[w], 0.0),
             False,
         )
         for _ in range(batch.steps):
             peds, _ = _step(params, batch.world, peds, 1.0 / 30.0)
-        p0, c = np.asarray(batch.position[w]), np.asarray(batch.counted[w])
-        sim = np.linalg.norm(np.asarray(peds.position) - p0, axis=1)
-        meas = np.linalg.norm(np.asarray(batch.end[w]) - p0, axis=1)
-        h = batch.steps / 30.0
-        out.append(np.sum(c * (sim - meas)) / h / max(c.sum(), 1))
+        out.append(np.asarray(peds.position))
     return np.asarray(out)
+
+
+def _loop_residuals(batch, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The residuals by hand from :func:`_loop_ends`, in NumPy: per window the counted
+    people's mean speed difference, and per person the velocity difference."""
+    h = batch.steps / 30.0
+    p0, c = np.asarray(batch.position), np.asarray(batch.counted)
+    meas = np.asarray(batch.end)
+    speed = []
+    for w in range(p0.shape[0]):
+        sim = np.linalg.norm(ends[w] - p0[w], axis=1)
+        obs = np.linalg.norm(meas[w] - p0[w], axis=1)
+        speed.append(np.sum(c[w] * (sim - obs)) / h / max(c[w].sum(), 1))
+    person = np.where(c[..., None], (ends - meas) / h, 0.0)
+    return np.asarray(speed), person
 
 
 TRUE = {"time_gap": 0.45, "desired_speed": 1.5}
@@ -176,15 +213,25 @@ def synthetic_batch():
 def test_window_residuals_equal_a_plain_loop_and_jit_equals_eager(synthetic_batch) -> None:
     batch, starts = synthetic_batch
     assert len(starts) >= 3 and int(batch.counted.sum()) > 0
-    names = ("time_gap", "desired_speed")
-    values = jnp.asarray([0.7, 1.2], jnp.float32)
+    names = ("time_gap", "desired_speed", "radius")
+    values = jnp.asarray([0.7, 1.2, 0.17], jnp.float32)
     got = window_residuals(names, values, batch)
-    want = _loop_residuals(batch, AvoidanceParams(time_gap=0.7), 1.2)
+    want, want_person = _loop_residuals(
+        batch, _loop_ends(batch, AvoidanceParams(time_gap=0.7), 1.2, 0.17)
+    )
+    person = person_residuals(names, values, batch)
+    assert person.shape == (*batch.counted.shape, 2)
+    np.testing.assert_allclose(np.asarray(person), want_person, atol=1e-4)
+    # The radius reaches the rollout (a dropped one would leave these equal).
+    at_02 = window_residuals(names[:2], values[:2], batch)
+    assert float(jnp.max(jnp.abs(got - at_02))) > 1e-3
     # float32 positions after 15 steps (~1 m): 1e-5 m/s would be rounding; 1e-4 leaves room
     # for XLA's fused sums while a wrong horizon, mask or start position is ≥ 1e-2 off.
     np.testing.assert_allclose(np.asarray(got), want, atol=1e-4)
     jitted = jax.jit(lambda v: window_residuals(names, v, batch))(values)
     np.testing.assert_allclose(np.asarray(jitted), np.asarray(got), atol=1e-5)
+    jitted = jax.jit(lambda v: person_residuals(names, v, batch))(values)
+    np.testing.assert_allclose(np.asarray(jitted), np.asarray(person), atol=1e-5)
     # Merging a batch with itself is the same windows twice (padding changes nothing).
     merged = merge_windows([batch, batch])
     assert len(merged) == 1
@@ -200,6 +247,12 @@ def test_at_the_generating_parameters_the_residuals_are_small(synthetic_batch) -
     at_truth = window_residuals(names, jnp.asarray(list(TRUE.values()), jnp.float32), batch)
     off = window_residuals(names, jnp.asarray([0.45, 1.2], jnp.float32), batch)
     assert float(jnp.max(jnp.abs(at_truth))) < 0.02 < float(jnp.max(jnp.abs(off)))
+    # Per person: the difference-estimated start velocity leaves up to ~3 cm/s on one person;
+    # a 20 % slower free speed moves the free walkers by ~0.3 m/s.
+    true = jnp.asarray(list(TRUE.values()), jnp.float32)
+    at_truth = person_residuals(names, true, batch)
+    off = person_residuals(names, jnp.asarray([0.45, 1.2], jnp.float32), batch)
+    assert float(jnp.max(jnp.abs(at_truth))) < 0.05 < float(jnp.max(jnp.abs(off)))
 
 
 @pytest.mark.slow
@@ -223,6 +276,8 @@ def test_bad_names_and_starts_are_errors(synthetic_batch) -> None:
         calibrate([batch], {"time_gapp": 0.5})
     with pytest.raises(JcrowdError, match="expected positive start values"):
         calibrate([batch], {"time_gap": -0.5})
+    with pytest.raises(JcrowdError, match="expected residual in"):
+        calibrate([batch], {"time_gap": 0.5}, residual="speeds")
     with pytest.raises(JcrowdError, match="whole frames"):
         make_windows(np.zeros((1, 4)), 16.0, (0, 100), 1.8, 1.8, horizon_s=0.3)
 

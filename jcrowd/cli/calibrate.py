@@ -6,15 +6,16 @@ come from ``steady_state.csv`` beside it (the whole run where it is not listed).
 :func:`jcrowd.crowd.calibrate.calibrate`: Levenberg–Marquardt through short differentiable
 rollouts from the measured states (that module's docstring says what is compared and why).
 
-``--fit`` names the parameters (default ``time_gap``, as
+``--fit`` names the parameters (default ``time_gap,radius``, as
 :data:`jcrowd.crowd.calibrate.DEFAULT_NAMES`, whose module says why; any field of
-:class:`~jcrowd.crowd.avoidance.AvoidanceParams` or ``desired_speed``), ``--start NAME=VALUE``
-moves a start value from the model's default. The fitted values are written (atomically) to
-``--out`` as TOML: ``[avoidance]`` (what a scenario's ``[dynamics] params = "params.toml"`` sets),
-``[population]`` (the fitted free speed: set your groups' ``speed`` to it to walk like the
-measured people) and ``[calibration]`` (the runs, the start, the residuals). ``--json`` prints
-one object: the start and fitted values, the residual RMS before and after, the steps, the
-Jacobian's singular values and the seconds taken.
+:class:`~jcrowd.crowd.avoidance.AvoidanceParams`, ``radius`` or ``desired_speed``),
+``--start NAME=VALUE`` moves a start value from the model's default. The fitted values are
+written (atomically) to ``--out`` as TOML: ``[avoidance]`` (what a scenario's ``[dynamics]
+params = "params.toml"`` sets), ``[body]`` (a fitted ``radius``: that scenario's ``[dynamics]
+radius`` unless it names its own), ``[population]`` (the fitted free speed: set your groups'
+``speed`` to it to walk like the measured people) and ``[calibration]`` (the runs, the start,
+the residuals). ``--json`` prints one object: the start and fitted values, the residual RMS
+before and after, the steps, the Jacobian's singular values and the seconds taken.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--out", default="params.toml", help="parameters file to write (TOML)")
     p.add_argument(
         "--fit",
-        default="time_gap",  # jcrowd.crowd.calibrate.DEFAULT_NAMES (the parser loads no jax)
+        default="time_gap,radius",  # jcrowd.crowd.calibrate.DEFAULT_NAMES (the parser loads no jax)
         help="comma-separated parameters to fit",
     )
     p.add_argument(
@@ -47,9 +48,15 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         metavar="NAME=VALUE",
         help="start values (default: the model's)",
     )
+    p.add_argument(
+        "--residual",
+        default="person",
+        choices=("person", "speed"),
+        help="compare every person's velocity, or each window's mean speed",
+    )
     p.add_argument("--horizon", type=float, default=0.5, help="seconds simulated per window")
     p.add_argument("--every", type=float, default=2.0, help="seconds between windows")
-    p.add_argument("--max-steps", type=int, default=40, help="Levenberg–Marquardt steps at most")
+    p.add_argument("--max-steps", type=int, default=100, help="Levenberg–Marquardt steps at most")
     return p
 
 
@@ -63,7 +70,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 def _start_values(names: list[str], given: list[str]) -> dict[str, float]:
     from jcrowd.crowd.avoidance import AvoidanceParams
-    from jcrowd.crowd.calibrate import SPEED_NAME
+    from jcrowd.crowd.calibrate import RADIUS_NAME, SPEED_NAME
+    from jcrowd.crowd.calibrate_windows import RADIUS
     from jcrowd.errors import JcrowdError
 
     defaults = AvoidanceParams()
@@ -71,10 +79,12 @@ def _start_values(names: list[str], given: list[str]) -> dict[str, float]:
     for name in names:
         if name == SPEED_NAME:
             start[name] = 1.34
+        elif name == RADIUS_NAME:
+            start[name] = RADIUS
         elif name in AvoidanceParams.__dataclass_fields__:
             start[name] = float(getattr(defaults, name))
         else:
-            fields = sorted([*AvoidanceParams.__dataclass_fields__, SPEED_NAME])
+            fields = sorted([*AvoidanceParams.__dataclass_fields__, SPEED_NAME, RADIUS_NAME])
             raise JcrowdError(f"--fit: expected names among {', '.join(fields)}, found {name!r}")
     for text in given:
         name, eq, value = text.partition("=")
@@ -119,12 +129,15 @@ def _calibrate(args: argparse.Namespace) -> dict[str, Any]:
             batches.append(batch)
             progress.advance(task)
         progress.update(task, description="fitting (compile, then Levenberg–Marquardt)")
-        cal = calibrate(merge_windows(batches), start, max_steps=args.max_steps)
+        cal = calibrate(
+            merge_windows(batches), start, max_steps=args.max_steps, residual=args.residual
+        )
         progress.advance(task)
     result = {
         "data": [r.name for r in runs],
         "windows": int(sum(b.position.shape[0] for b in batches)),
         "horizon_s": args.horizon,
+        "residual": args.residual,
         "names": list(cal.names),
         "start": dict(zip(cal.names, (round(float(v), 6) for v in cal.start), strict=True)),
         "fitted": dict(zip(cal.names, (round(float(v), 4) for v in cal.values), strict=True)),
@@ -142,11 +155,13 @@ def _calibrate(args: argparse.Namespace) -> dict[str, Any]:
 
 def params_toml(result: dict[str, Any]) -> str:
     """The parameters file: ``[avoidance]``, ``[population]`` and ``[calibration]``."""
-    from jcrowd.crowd.calibrate import SPEED_NAME
+    from jcrowd.crowd.calibrate import EXTRA_NAMES, RADIUS_NAME, SPEED_NAME
 
     fitted = result["fitted"]
     lines = ["# jcrowd calibrate: fitted to measured trajectories", "", "[avoidance]"]
-    lines += [f"{k} = {v!r}" for k, v in fitted.items() if k != SPEED_NAME]
+    lines += [f"{k} = {v!r}" for k, v in fitted.items() if k not in EXTRA_NAMES]
+    if RADIUS_NAME in fitted:
+        lines += ["", "[body]", f"{RADIUS_NAME} = {fitted[RADIUS_NAME]!r}"]
     if SPEED_NAME in fitted:
         lines += ["", "[population]", f"{SPEED_NAME} = {fitted[SPEED_NAME]!r}"]
     lines += [
@@ -154,6 +169,7 @@ def params_toml(result: dict[str, Any]) -> str:
         "[calibration]",
         "data = [" + ", ".join(f'"{d}"' for d in result["data"]) + "]",
         f"horizon_s = {result['horizon_s']!r}",
+        f"residual = {result['residual']!r}",
         f"residual_rms_start_m_s = {result['residual_rms_start_m_s']!r}",
         f"residual_rms_m_s = {result['residual_rms_m_s']!r}",
         f"steps = {result['steps']}",

@@ -85,6 +85,10 @@ from jcrowd.errors import JcrowdError
 
 __all__ = [
     "DEFAULT_NAMES",
+    "EXTRA_NAMES",
+    "RADIUS_NAME",
+    "RESIDUALS",
+    "SPEED_NAME",
     "Calibration",
     "WindowBatch",
     "calibrate",
@@ -92,29 +96,41 @@ __all__ = [
     "make_windows",
     "merge_windows",
     "parameter_values",
+    "person_residuals",
     "window_residuals",
 ]
 
-DEFAULT_NAMES = ("time_gap",)
+DEFAULT_NAMES = ("time_gap", "radius")
 """The parameters fitted by default (module docstring)."""
 
 SPEED_NAME = "desired_speed"
 """The free walking speed ``v0`` (m/s), fitted beside the avoidance model's fields."""
 
+RADIUS_NAME = "radius"
+"""Every agent's body radius ``r`` (m; the size ``ℓ = r_i + r_j`` of Eq. 2–4), fitted beside the
+avoidance model's fields."""
+
+EXTRA_NAMES = (SPEED_NAME, RADIUS_NAME)
+"""The fitted names that are not fields of :class:`~jcrowd.crowd.avoidance.AvoidanceParams`."""
+
 
 def parameter_values(
     names: Sequence[str], values: Float[Array, " P"], base: AvoidanceParams
-) -> tuple[AvoidanceParams, Float[Array, ""]]:
-    """``base`` with the named fields set to ``values``, and the desired speed (``names`` may
-    hold ``desired_speed``; without it, the crowd-dynamics bench's 1.34 m/s)."""
+) -> tuple[AvoidanceParams, Float[Array, ""], Float[Array, ""]]:
+    """``base`` with the named fields set to ``values``, the desired speed and the body radius
+    (``names`` may hold ``desired_speed`` and ``radius``; without them, the crowd-dynamics
+    bench's 1.34 m/s and 0.2 m)."""
     speed = jnp.asarray(1.34, values.dtype)
+    radius = jnp.asarray(RADIUS, values.dtype)
     params = base
     for k, name in enumerate(names):
         if name == SPEED_NAME:
             speed = values[k]
+        elif name == RADIUS_NAME:
+            radius = values[k]
         else:
             params = eqx.tree_at(_field(name), params, values[k])
-    return params, speed
+    return params, speed, radius
 
 
 def _field(name: str) -> Callable[[AvoidanceParams], Array]:
@@ -125,7 +141,7 @@ def _field(name: str) -> Callable[[AvoidanceParams], Array]:
 
 
 def _check_names(names: Sequence[str]) -> None:
-    fields = set(AvoidanceParams.__dataclass_fields__) | {SPEED_NAME}
+    fields = set(AvoidanceParams.__dataclass_fields__) | set(EXTRA_NAMES)
     bad = [n for n in names if n not in fields]
     if bad or not names or len(set(names)) != len(names):
         raise JcrowdError(
@@ -135,7 +151,7 @@ def _check_names(names: Sequence[str]) -> None:
 
 
 def _end_positions(
-    params: AvoidanceParams, speed: Float[Array, ""], batch: WindowBatch
+    params: AvoidanceParams, speed: Float[Array, ""], radius: Float[Array, ""], batch: WindowBatch
 ) -> tuple[Float[Array, "W N 2"], Array]:
     n = batch.position.shape[1]
 
@@ -144,7 +160,7 @@ def _end_positions(
             position,
             jnp.zeros(n, jnp.int32),
             jnp.full(n, speed),
-            jnp.full(n, RADIUS, position.dtype),
+            jnp.full(n, radius, position.dtype),
             alive,
             jnp.where(alive[:, None], velocity, 0.0),
             False,
@@ -172,8 +188,10 @@ def window_residuals(
 ) -> Float[Array, " W"]:
     """Per window: the simulated minus the measured mean speed (m/s) over the horizon of the
     people counted (module docstring); 0 where nobody is counted."""
-    params, speed = parameter_values(names, values, AvoidanceParams() if base is None else base)
-    end, _ = _end_positions(params, speed, batch)
+    params, speed, radius = parameter_values(
+        names, values, AvoidanceParams() if base is None else base
+    )
+    end, _ = _end_positions(params, speed, radius, batch)
     horizon = batch.steps * DT
 
     def speeds(at: Array) -> Array:
@@ -183,6 +201,27 @@ def window_residuals(
     w = batch.counted.astype(values.dtype)
     diff = jnp.sum(w * (speeds(end) - speeds(batch.end)), axis=1)
     return diff / jnp.maximum(jnp.sum(w, axis=1), 1.0)
+
+
+def person_residuals(
+    names: Sequence[str],
+    values: Float[Array, " P"],
+    batch: WindowBatch,
+    base: AvoidanceParams | None = None,
+) -> Float[Array, "W N 2"]:
+    """Per window and person counted: the simulated minus the measured mean velocity (m/s,
+    both components: the end positions' difference ÷ the horizon); 0 for everyone else
+    (module docstring)."""
+    params, speed, radius = parameter_values(
+        names, values, AvoidanceParams() if base is None else base
+    )
+    end, _ = _end_positions(params, speed, radius, batch)
+    return jnp.where(batch.counted[..., None], (end - batch.end) / (batch.steps * DT), 0.0)
+
+
+RESIDUALS = ("person", "speed")
+"""What a window compares: every counted person's velocity (:func:`person_residuals`) or the
+counted people's mean speed (:func:`window_residuals`)."""
 
 
 @dataclass(frozen=True)
@@ -210,13 +249,14 @@ class Calibration:
 
 
 def _all_residuals(
-    log_values: Array, batches: tuple[WindowBatch, ...], names: tuple[str, ...]
+    log_values: Array, batches: tuple[WindowBatch, ...], names: tuple[str, ...], kind: str
 ) -> Array:
     values = jnp.exp(log_values)
-    return jnp.concatenate([window_residuals(names, values, b) for b in batches])
+    one = person_residuals if kind == "person" else window_residuals
+    return jnp.concatenate([one(names, values, b).reshape(-1) for b in batches])
 
 
-def _fn(y: Array, args: tuple[tuple[WindowBatch, ...], tuple[str, ...]]) -> Array:
+def _fn(y: Array, args: tuple[tuple[WindowBatch, ...], tuple[str, ...], str]) -> Array:
     """The residuals in the log-parameters; one function object, so optimistix's compiled
     solve is reused across calls with batches of the same shapes."""
     return _all_residuals(y, *args)
@@ -226,19 +266,23 @@ def calibrate(
     batches: Sequence[WindowBatch],
     start: dict[str, float],
     *,
-    max_steps: int = 40,
+    max_steps: int = 100,
     rtol: float = 1e-4,
     atol: float = 1e-5,
+    residual: str = "person",
 ) -> Calibration:
     """Fit the parameters named in ``start`` (from those values) to every batch's windows by
-    Levenberg–Marquardt on their logarithms (module docstring).
+    Levenberg–Marquardt on their logarithms (module docstring); ``residual`` is one of
+    :data:`RESIDUALS`.
 
     Raises:
         JcrowdError: unknown or repeated names, a start value that is not positive and finite,
-            or no batch.
+            no batch, or an unknown ``residual``.
     """
     names = tuple(start)
     _check_names(names)
+    if residual not in RESIDUALS:
+        raise JcrowdError(f"calibrate: expected residual in {RESIDUALS}, found {residual!r}")
     x0 = np.array([start[n] for n in names], np.float64)
     if not np.all(np.isfinite(x0) & (x0 > 0)):
         raise JcrowdError(f"calibrate: expected positive start values, found {start}")
@@ -247,7 +291,7 @@ def calibrate(
     group = tuple(batches)
     y0 = jnp.log(jnp.asarray(x0, jnp.float32))
 
-    args = (group, names)
+    args = (group, names, residual)
     solver: Any = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     sol: Any = optx.least_squares(_fn, solver, y0, args, max_steps=max_steps, throw=False)
     r0, r1 = _fn(y0, args), _fn(sol.value, args)

@@ -193,14 +193,17 @@ class _Reader:
         keys = ("avoid", "model", "radius", "far_every", "params")
         table = dict(self.table(value, "dynamics", keys))
         if "params" in table:
-            table["params"], table["avoidance"] = self.params(table["params"], base_dir)
+            table["params"], table["avoidance"], radius = self.params(table["params"], base_dir)
+            if radius is not None and "radius" not in table:
+                table["radius"] = radius  # the scenario's own radius wins over the file's
         return self.build("dynamics", DynamicsSettings, **table)
 
     def params(
         self, value: Any, base_dir: pathlib.Path
-    ) -> tuple[str, tuple[tuple[str, float], ...]]:
-        """A parameters file (``jcrowd calibrate --out``): its ``[avoidance]`` numbers; the
-        names are checked against the model's when the step is prepared."""
+    ) -> tuple[str, tuple[tuple[str, float], ...], float | None]:
+        """A parameters file (``jcrowd calibrate --out``): its ``[avoidance]`` numbers (the
+        names are checked against the model's when the step is prepared) and its ``[body]``
+        radius, if it has one."""
         at = "dynamics.params"
         if not isinstance(value, str) or not value:
             self.fail(at, f"expected a parameters file path, found {show(value)}")
@@ -212,23 +215,30 @@ class _Reader:
             self.fail(at, f"expected an existing parameters file, found {show(value)} (no {path})")
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
             self.fail(at, f"{path}: expected a TOML parameters file, found an invalid one ({e})")
-        unknown = sorted(set(doc) - {"avoidance", "population", "calibration"})
+        unknown = sorted(set(doc) - {"avoidance", "body", "population", "calibration"})
         table = doc.get("avoidance")
-        if unknown or not isinstance(table, dict):
+        body = doc.get("body", {})
+        if unknown or not isinstance(table, dict) or not isinstance(body, dict):
             self.fail(
                 at,
-                f"{path}: expected an [avoidance] table of numbers (and optionally [population], "
-                f"[calibration]), found tables {sorted(doc)}",
+                f"{path}: expected an [avoidance] table of numbers (and optionally [body], "
+                f"[population], [calibration]), found tables {sorted(doc)}",
             )
+        if set(body) - {"radius"}:
+            self.fail(at, f"{path}: body: expected only radius, found keys {sorted(body)}")
         pairs = []
-        for name, v in table.items():
+        for name, v in [*table.items(), *(("body." + k, x) for k, x in body.items())]:
             ok = isinstance(v, int | float) and not isinstance(v, bool) and 0 < v < float("inf")
             if not ok:
-                self.fail(
-                    at, f"{path}: avoidance.{name}: expected a positive number, found {show(v)}"
-                )
+                where = name if name.startswith("body.") else f"avoidance.{name}"
+                self.fail(at, f"{path}: {where}: expected a positive number, found {show(v)}")
             pairs.append((str(name), float(v)))
-        return str(path), tuple(pairs)
+        radius = dict(pairs).pop("body.radius", None)
+        if radius is not None and not 0.1 <= radius <= 0.4:
+            self.fail(
+                at, f"{path}: body.radius: expected a radius in [0.1, 0.4] (m), found {radius}"
+            )
+        return str(path), tuple(p for p in pairs if not p[0].startswith("body.")), radius
 
 
 def _join(path: str, key: str) -> str:

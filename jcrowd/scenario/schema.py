@@ -245,7 +245,8 @@ class DynamicsSettings:
     levels, or not drawn, compute their avoidance every ``far_every`` steps, in turn (1–8; 1: every
     agent every step). ``params``: a parameters file (``jcrowd calibrate --out``; its
     ``[avoidance]`` table sets fields of :class:`~jcrowd.crowd.avoidance.AvoidanceParams`, the rest
-    keep their defaults); ``avoidance`` holds what it set, as ``(name, value)``pairs."""
+    keep their defaults; its ``[body] radius``, when it has one, is the ``radius`` unless this
+    table names one); ``avoidance`` holds what it set, as ``(name, value)`` pairs."""
 
     avoid: bool = False
     model: str = "collision-free-speed"
