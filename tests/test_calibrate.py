@@ -111,6 +111,21 @@ def test_a_fitted_radius_is_the_scenarios_unless_it_names_its_own(tmp_path: Path
     assert dict(sc.dynamics.avoidance) == {"time_gap": 0.45}
     own = _SCENARIO.format(params="p.toml") + "radius = 0.25\n"
     assert parse_scenario(own, "s.toml", base_dir=tmp_path).dynamics.radius == 0.25
+    # What the command writes for a (T, r, v0) fit is what a scenario reads.
+    from jcrowd.cli.calibrate import params_toml
+
+    result = {
+        "fitted": {"time_gap": 0.61, "radius": 0.14, "desired_speed": 1.4},
+        "data": ["uo-100-180-180"],
+        "horizon_s": 0.5,
+        "residual": "person",
+        "residual_rms_start_m_s": 0.1,
+        "residual_rms_m_s": 0.07,
+        "steps": 20,
+    }
+    (tmp_path / "cli.toml").write_text(params_toml(result))
+    sc = parse_scenario(_SCENARIO.format(params="cli.toml"), "s.toml", base_dir=tmp_path)
+    assert sc.dynamics.radius == 0.14 and dict(sc.dynamics.avoidance) == {"time_gap": 0.61}
     (tmp_path / "none.toml").write_text("[avoidance]\ntime_gap = 0.45\n")
     sc = parse_scenario(_SCENARIO.format(params="none.toml"), "s.toml", base_dir=tmp_path)
     assert sc.dynamics.radius == 0.2
@@ -196,7 +211,7 @@ def _loop_residuals(batch, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(speed), person
 
 
-TRUE = {"time_gap": 0.45, "desired_speed": 1.5}
+TRUE = {"time_gap": 0.45, "radius": 0.2, "desired_speed": 1.5}
 
 
 @pytest.fixture(scope="module")
@@ -245,13 +260,13 @@ def test_at_the_generating_parameters_the_residuals_are_small(synthetic_batch) -
     batch, _ = synthetic_batch
     names = tuple(TRUE)
     at_truth = window_residuals(names, jnp.asarray(list(TRUE.values()), jnp.float32), batch)
-    off = window_residuals(names, jnp.asarray([0.45, 1.2], jnp.float32), batch)
+    off = window_residuals(names, jnp.asarray([0.45, 0.2, 1.2], jnp.float32), batch)
     assert float(jnp.max(jnp.abs(at_truth))) < 0.02 < float(jnp.max(jnp.abs(off)))
     # Per person: the difference-estimated start velocity leaves up to ~3 cm/s on one person;
     # a 20 % slower free speed moves the free walkers by ~0.3 m/s.
     true = jnp.asarray(list(TRUE.values()), jnp.float32)
     at_truth = person_residuals(names, true, batch)
-    off = person_residuals(names, jnp.asarray([0.45, 1.2], jnp.float32), batch)
+    off = person_residuals(names, jnp.asarray([0.45, 0.2, 1.2], jnp.float32), batch)
     assert float(jnp.max(jnp.abs(at_truth))) < 0.05 < float(jnp.max(jnp.abs(off)))
 
 
@@ -302,8 +317,9 @@ def test_cli_fits_one_run_and_writes_a_file_a_scenario_takes(
     keys = {"data", "windows", "names", "start", "fitted", "residual_rms_start_m_s"}
     assert keys | {"residual_rms_m_s", "steps", "singular_values", "seconds"} <= set(result)
     assert result["data"] == ["uo-100-180-180"] and result["names"] == ["time_gap"]
+    assert result["residual"] == "person"
     assert result["start"] == {"time_gap": 0.78}
-    # Four LM steps from T = 0.78 s on this run's 19 windows: measured 0.48 -> 0.13 m/s.
+    # Four LM steps from T = 0.78 s on this run's 19 windows lower the per-person residual.
     assert result["residual_rms_m_s"] < 0.8 * result["residual_rms_start_m_s"], result
     fitted = result["fitted"]["time_gap"]
     assert 0.05 < fitted < 0.78
