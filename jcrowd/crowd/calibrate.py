@@ -1,8 +1,8 @@
 """Calibrating the pedestrian dynamics to measured trajectories, by gradient (issue 22, item 2).
 
-The collision-free speed model's parameters (:class:`~jcrowd.crowd.avoidance.AvoidanceParams`)
-and the free walking speed ``v0`` are fitted to measured runs by Levenberg–Marquardt
-(optimistix) through differentiable rollouts (:mod:`jcrowd.crowd.rollout`).
+The collision-free speed model's parameters (:class:`~jcrowd.crowd.avoidance.AvoidanceParams`),
+the body radius ``r`` and the free walking speed ``v0`` are fitted to measured runs by
+Levenberg–Marquardt (optimistix) through differentiable rollouts (:mod:`jcrowd.crowd.rollout`).
 
 Readings taken, and why:
 
@@ -15,39 +15,50 @@ Readings taken, and why:
   of 1/30 s, 8 frames of 16 fps). This is the usual trajectory-based calibration of
   microscopic models (a prediction from the measured state, not a free run), and it keeps the
   derivative meaningful: at 1.5 s (45 steps) the Jacobian reached 10³–10⁴ in the densest runs
-  (``uo-050-070-070``; 10² in ``uo-050-180-180``), at 0.5 s it stays bounded.
-- **What it does not achieve (measured).** The fitted ``time_gap`` does not lower the free
-  run's fundamental-diagram speed error below the hand-chosen defaults' (``bench/calibrate.py``,
-  0.138 m/s): ``time_gap`` alone from three starts gives 0.276–0.281 s (1.7 % apart) and
-  0.136–0.141 m/s; with ``desired_speed`` too, 0.305 s and 1.459 m/s and 0.158–0.183 m/s (the
-  free run is chaotic: fits 2 % apart move it by ±0.005 m/s). The windows and the fundamental
-  diagram want different things of ``T``. From the measured states, the model at the default
-  ``T`` = 0.6 s walks slower than the people in every run (mean window residual −0.15 to
-  −0.37 m/s; at 0.3 s, −0.14 to +0.09): that is where the fit goes. In a free run a short ``T``
-  lets the corridor carry the measured inflow at a lower density and a higher speed than
-  measured — ``uo-180-180-180``, which has no bottleneck, was congested (1.68 /m² at
-  0.96 m/s) and the model carries the same ~1.6 /m/s at 1.35 /m² and 1.21 m/s with
-  ``T`` = 0.305 s — so the per-run speed error there grows as ``T`` falls, while in the
-  bottleneck runs it shrinks. On a grid (``v0`` = 1.34 m/s), the fundamental diagram is best
-  near ``T`` = 0.5 s (0.117 m/s), where the windows' mean residual is −0.12 to −0.29 m/s. A
-  1.0 s horizon does not help: its Jacobian reached 3.3·10³ and Levenberg–Marquardt stayed at
-  its start. Fitting ``desired_speed`` moves it to 1.46 m/s, faster than the free-flow runs'
-  measured 1.34–1.39 m/s; adding ``plain_reaction_time`` is degenerate (``T`` → 0.005 s,
-  ``τ`` → 1.4 s absorb the start's mismatch).
-- **What is compared.** Per window, the mean speed over the horizon (displacement ÷
-  ``horizon_s``) of the people who start in the run's measurement area, simulated minus
-  measured: one residual per window, in m/s. The fundamental diagram the result is judged by
-  (``bench/pedestrians.py``'s ``fd_speed_rmse_m_s``) is PedPy's speed in that area, so the fit
-  targets the same people and the same quantity on a shorter time scale. Windows where nobody
-  starts in the area count zero.
-- **What is fitted.** By default ``time_gap`` (``T``, how far ahead people keep their
-  spacing) alone: the windows fix it well (one optimum from every start), while ``v0`` comes
-  out biased and the reaction time degenerate (above). Any field of
-  :class:`~jcrowd.crowd.avoidance.AvoidanceParams` and ``desired_speed`` (``v0``) may be
-  named. The repulsion's ``strength``/``range``, ``wall_strength`` and ``anisotropy`` move the
-  residuals by less than 1 % of ``T``'s effect (their columns of the Jacobian at the
-  defaults); a fit of them is set by noise. Parameters are fitted as logarithms (each stays
-  positive; a step is relative).
+  (10² in the free-flow ``uo-050-180-180``), at 0.5 s it stays bounded; at 1.0 s it
+  reached 3.3·10³ and Levenberg–Marquardt stayed at its start.
+- **What is compared: every person's velocity** (``residual="person"``, the default). Per
+  window and per person who starts in the run's measurement area, the simulated minus the
+  measured mean velocity over the horizon (the end positions' difference ÷ ``horizon_s``; both
+  components, m/s; 0 for everyone else). The alternative ``residual="speed"`` compares one
+  number per window, the counted people's mean speed. Per person is what fixes the body
+  radius: with mean speeds the windows determine only a combination of ``T`` and ``r`` — the
+  best ``T`` runs from 0.28 s at ``r`` = 0.2 m to 0.49 s at 0.15 m along a valley whose RMS
+  changes by 7 % (0.146–0.157 m/s), and a (``T``, ``r``) fit from (0.78, 0.26) stopped at
+  (0.12 s, 0.22 m), whose free run is far off (fundamental-diagram speed RMSE 0.179 m/s). A mean
+  lets one person's error cancel another's; per person it cannot, and the Jacobian's smaller
+  singular value rises from 6.6 to 11.
+- **What is fitted: ``T`` and ``r``** (:data:`DEFAULT_NAMES`). ``ℓ = r_i + r_j`` is the spacing
+  at which people stop (Eq. 2), the width of the corridor ahead (Eq. 3) and the repulsion's
+  reach (Eq. 4); JuPedSim's default ``r`` = 0.2 m is half a shoulder width, but the tracked
+  heads come closer than that (in the densest run 5 % of nearest-neighbour distances are under
+  0.31 m), and with ``r`` fixed at 0.2 m the windows could only ask for a short ``T`` (0.28 s),
+  which let the corridor without a bottleneck (``uo-180-180-180``) carry the measured flow at a
+  lower density and a higher speed than the congested crowd measured there (fundamental-diagram
+  speed RMSE 0.136–0.141 m/s, no better than the defaults' 0.138 m/s). Fitted together from
+  three starts (``bench/calibrate.py``, row "calibrate — 2026-12-06 — code 2d51885"): (``T``,
+  ``r``) = (0.483 s, 0.158 m), (0.609, 0.139), (0.624, 0.138), and every fit's free run beats
+  the defaults' fundamental diagram: speed RMSE 0.097, 0.107, 0.088 m/s against 0.138 m/s. **Not
+  met: stability.** The first start stops 21 % below the others' ``T``. The per-person objective
+  has one broad valley, ``T`` rising as ``r`` falls, nearly flat along it (on a grid, RMS within
+  1.5 % from (0.48, 0.16) to (0.68, 0.13), lowest near (0.60–0.68, 0.13–0.14) and falling
+  monotonically from the first fit towards the others), and ``r`` enters Eq. 3 through a hard
+  set — who is in the corridor ahead — so the objective is a staircase in ``r`` that the
+  pathwise derivative does not see: Levenberg–Marquardt's steps along the valley are rejected
+  and it reports convergence early (tighter tolerances stopped it at (0.35, 0.20); a restart
+  from the first fit moved it only to (0.51, 0.16)). On the model's own trajectories, where the
+  valley is sharp, ``T``, ``r`` and ``v0`` are recovered within 1 % from ±30 %
+  (``tests/test_calibrate.py``).
+- **What else was tried.** Fitting ``desired_speed`` moves it to 1.46 m/s, faster than the
+  free-flow runs' measured 1.34–1.39 m/s, and worsens the fundamental diagram (0.158–0.183
+  m/s); adding ``plain_reaction_time`` is degenerate (``T`` → 0.005 s, ``τ`` → 1.4 s absorb
+  the start's mismatch); the smooth ``V``'s ``sharpness`` barely moves the windows (mean
+  residual RMS 0.287 → 0.271 m/s at ``n`` = 8, worse at 16). The repulsion's
+  ``strength``/``range``, ``wall_strength`` and ``anisotropy`` move the residuals by less than
+  1 % of ``T``'s effect (their columns of the Jacobian at the defaults); a fit of them is set
+  by noise. Any field of :class:`~jcrowd.crowd.avoidance.AvoidanceParams`, ``radius`` and
+  ``desired_speed`` may be named. Parameters are fitted as logarithms (each stays positive; a
+  step is relative).
 - **Structure held by the forward pass.** As in every rollout, who is the nearest neighbour
   ahead is decided by the forward pass and carries no gradient (:mod:`jcrowd.crowd.rollout`).
 
