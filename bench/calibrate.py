@@ -14,7 +14,7 @@ item 2).
   three fits' median.
 
 ``python bench/calibrate.py [--names time_gap,radius] [--residual person|speed] [--horizon 0.5]
-[--max-steps 100] [--json] [--no-record]``
+[--every 1.0] [--max-steps 100] [--json] [--no-record]``
 """
 
 from __future__ import annotations
@@ -88,6 +88,7 @@ def main() -> None:
     ap.add_argument("--hermes", default=str(ped.DATA / "hermes_uo"))
     ap.add_argument("--names", default="time_gap,radius")
     ap.add_argument("--horizon", type=float, default=0.5)
+    ap.add_argument("--every", type=float, default=1.0, help="seconds between windows")
     ap.add_argument("--residual", default="person", choices=("person", "speed"))
     ap.add_argument("--max-steps", type=int, default=100)
     ap.add_argument("--json", action="store_true")
@@ -106,7 +107,15 @@ def main() -> None:
         factors[2] = [1.15]  # one parameter has two ±30 % starts; the third lies between
     runs = load_hermes_runs([args.hermes])
     per_run = [
-        make_windows(r.rows, r.fps, r.steady, r.corridor_m, r.exit_m, horizon_s=args.horizon)[0]
+        make_windows(
+            r.rows,
+            r.fps,
+            r.steady,
+            r.corridor_m,
+            r.exit_m,
+            horizon_s=args.horizon,
+            every_s=args.every,
+        )[0]
         for r in runs
     ]
     batches = merge_windows(per_run)
@@ -152,6 +161,7 @@ def main() -> None:
     out = {
         "names": list(names),
         "horizon_s": args.horizon,
+        "every_s": args.every,
         "residual": args.residual,
         "windows": int(sum(b.position.shape[0] for b in batches)),
         "fd_speed_rmse_default_m_s": round(rmse_default, 3),
@@ -165,7 +175,8 @@ def main() -> None:
         "seconds": round(time.perf_counter() - t0, 1),
     }
     lines = [
-        f"names {', '.join(names)}; {args.residual} residuals; horizon {args.horizon} s; "
+        f"names {', '.join(names)}; {args.residual} residuals; horizon {args.horizon} s every "
+        f"{args.every} s; "
         f"{out['windows']} windows; "
         f"defaults' fd_speed_rmse {out['fd_speed_rmse_default_m_s']} m/s",
         "",

@@ -311,7 +311,7 @@ def test_cli_fits_one_run_and_writes_a_file_a_scenario_takes(
 
     run, out = hermes_dir / "uo-100-180-180.txt", tmp_path / "p.toml"
     argv = ["calibrate", str(run), "--fit", "time_gap", "--start", "time_gap=0.78"]
-    code = main([*argv, "--max-steps", "4", "--out", str(out), "--json"])
+    code = main([*argv, "--max-steps", "4", "--every", "2", "--out", str(out), "--json"])
     result = json.loads(capsys.readouterr().out)
     assert code == 0
     keys = {"data", "windows", "names", "start", "fitted", "residual_rms_start_m_s"}

@@ -55,7 +55,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="compare every person's velocity, or each window's mean speed",
     )
     p.add_argument("--horizon", type=float, default=0.5, help="seconds simulated per window")
-    p.add_argument("--every", type=float, default=2.0, help="seconds between windows")
+    p.add_argument("--every", type=float, default=1.0, help="seconds between windows")
     p.add_argument("--max-steps", type=int, default=100, help="Levenberg–Marquardt steps at most")
     return p
 
