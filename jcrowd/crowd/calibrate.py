@@ -32,22 +32,28 @@ Readings taken, and why:
   at which people stop (Eq. 2), the width of the corridor ahead (Eq. 3) and the repulsion's
   reach (Eq. 4); JuPedSim's default ``r`` = 0.2 m is half a shoulder width, but the tracked
   heads come closer than that (in the densest run 5 % of nearest-neighbour distances are under
-  0.31 m), and with ``r`` fixed at 0.2 m the windows could only ask for a short ``T`` (0.28 s),
-  which let the corridor without a bottleneck (``uo-180-180-180``) carry the measured flow at a
-  lower density and a higher speed than the congested crowd measured there (fundamental-diagram
-  speed RMSE 0.136–0.141 m/s, no better than the defaults' 0.138 m/s). Fitted together from
-  three starts (``bench/calibrate.py``, row "calibrate — 2026-12-06 — code 2d51885"): (``T``,
-  ``r``) = (0.483 s, 0.158 m), (0.609, 0.139), (0.624, 0.138), and every fit's free run beats
-  the defaults' fundamental diagram: speed RMSE 0.097, 0.107, 0.088 m/s against 0.138 m/s. **Not
-  met: stability.** The first start stops 21 % below the others' ``T``. The per-person objective
-  has one broad valley, ``T`` rising as ``r`` falls, nearly flat along it (on a grid, RMS within
-  1.5 % from (0.48, 0.16) to (0.68, 0.13), lowest near (0.60–0.68, 0.13–0.14) and falling
-  monotonically from the first fit towards the others), and ``r`` enters Eq. 3 through a hard
-  set — who is in the corridor ahead — so the objective is a staircase in ``r`` that the
-  pathwise derivative does not see: Levenberg–Marquardt's steps along the valley are rejected
-  and it reports convergence early (tighter tolerances stopped it at (0.35, 0.20); a restart
-  from the first fit moved it only to (0.51, 0.16)). On the model's own trajectories, where the
-  valley is sharp, ``T``, ``r`` and ``v0`` are recovered within 1 % from ±30 %
+  0.31 m; the entrance experiment's crowd stood 0.27 m centre to centre,
+  ``examples/entrance.toml``), and with ``r`` fixed at 0.2 m the windows could only ask for a
+  short ``T`` (0.28 s), which let the corridor without a bottleneck (``uo-180-180-180``) carry
+  the measured flow at a lower density and a higher speed than the congested crowd measured
+  there (fundamental-diagram speed RMSE 0.136–0.141 m/s, no better than the defaults' 0.138
+  m/s). Fitted together from three starts on windows every 1 s (``bench/calibrate.py``, row
+  "calibrate — 2026-12-06 — code 441c356"): (``T``, ``r``) = (0.387 s, 0.193 m), (0.598, 0.143),
+  (0.627, 0.138), and every fit's free run beats the defaults' fundamental diagram: speed RMSE
+  0.113, 0.079, 0.098 m/s against 0.138 m/s (every 2 s, row "… code 2d51885": (0.483, 0.158),
+  (0.609, 0.139), (0.624, 0.138) and 0.097, 0.107, 0.088). **Not met: stability** (35 % from the
+  median). Two starts agree within 5 %; the third (×1.3 of both) stops early at a worse
+  objective (window RMS 0.083 against 0.072 m/s). The per-person objective has one broad valley,
+  ``T`` rising as ``r`` falls, nearly flat along it (every 2 s, on a grid: RMS within 1.5 % from
+  (0.48, 0.16) to (0.68, 0.13), lowest near (0.60–0.68, 0.13–0.14), falling monotonically from
+  the early stop towards the others), and ``r`` enters Eq. 3 through a hard set — who is in the
+  corridor ahead — so the objective is a staircase in ``r`` that the pathwise derivative does
+  not see: Levenberg–Marquardt's steps along the valley are rejected and it reports convergence
+  on a step's edge (there the Jacobian's largest singular value was 2409 against 50 at the
+  others). Which edge is path-dependent: the same ×1.3 start in a separate process reached
+  (0.571, 0.148) in 77 steps; every 2 s, tighter tolerances stopped it at (0.35, 0.20) and a
+  restart from (0.483, 0.158) moved it only to (0.51, 0.16). On the model's own trajectories,
+  where the valley is sharp, ``T``, ``r`` and ``v0`` are recovered within 1 % from ±30 %
   (``tests/test_calibrate.py``).
 - **What else was tried.** Fitting ``desired_speed`` moves it to 1.46 m/s, faster than the
   free-flow runs' measured 1.34–1.39 m/s, and worsens the fundamental diagram (0.158–0.183

@@ -109,7 +109,7 @@ def make_windows(
     exit_m: float,
     *,
     horizon_s: float = 0.5,
-    every_s: float = 2.0,
+    every_s: float = 1.0,
     agents: int = 0,
 ) -> tuple[WindowBatch, np.ndarray]:
     """The windows of one run (module docstring) and each window's start frame.
