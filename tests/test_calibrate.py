@@ -129,17 +129,14 @@ def test_a_fitted_radius_is_the_scenarios_unless_it_names_its_own(tmp_path: Path
     (tmp_path / "none.toml").write_text("[avoidance]\ntime_gap = 0.45\n")
     sc = parse_scenario(_SCENARIO.format(params="none.toml"), "s.toml", base_dir=tmp_path)
     assert sc.dynamics.radius == 0.2
-    (tmp_path / "neg.toml").write_text("[avoidance]\ntime_gap = 0.45\n[body]\nradius = -1\n")
-    with pytest.raises(ScenarioError, match=r"body\.radius: expected a positive number"):
-        parse_scenario(_SCENARIO.format(params="neg.toml"), "s.toml", base_dir=tmp_path)
-    (tmp_path / "key.toml").write_text("[avoidance]\ntime_gap = 0.45\n[body]\nheight = 1.8\n")
-    with pytest.raises(ScenarioError, match=r"body: expected only radius, found keys \['height'\]"):
-        parse_scenario(_SCENARIO.format(params="key.toml"), "s.toml", base_dir=tmp_path)
-    (tmp_path / "big.toml").write_text("[avoidance]\ntime_gap = 0.45\n[body]\nradius = 0.9\n")
-    with pytest.raises(
-        ScenarioError, match=r"big.toml: body.radius: expected a radius in \[0.1, 0.4\]"
-    ):
-        parse_scenario(_SCENARIO.format(params="big.toml"), "s.toml", base_dir=tmp_path)
+    for name, body, match in [
+        ("neg", "radius = -1", r"neg.toml: body\.radius: expected a positive number"),
+        ("key", "height = 1.8", r"body: expected only radius, found keys \['height'\]"),
+        ("big", "radius = 0.9", r"big.toml: body.radius: expected a radius in \[0.1, 0.4\]"),
+    ]:
+        (tmp_path / f"{name}.toml").write_text(f"[avoidance]\ntime_gap = 0.45\n[body]\n{body}\n")
+        with pytest.raises(ScenarioError, match=match):
+            parse_scenario(_SCENARIO.format(params=f"{name}.toml"), "s.toml", base_dir=tmp_path)
 
 
 # ------------------------------------------------------------------------------ windows

@@ -197,6 +197,17 @@ def _end_positions(
     return end, jnp.max(overflow)
 
 
+def _simulated_ends(
+    names: Sequence[str], values: Array, batch: WindowBatch, base: AvoidanceParams | None
+) -> Float[Array, "W N 2"]:
+    """Every window's crowd simulated over the horizon under the named values: where each
+    person ends."""
+    params, speed, radius = parameter_values(
+        names, values, AvoidanceParams() if base is None else base
+    )
+    return _end_positions(params, speed, radius, batch)[0]
+
+
 def window_residuals(
     names: Sequence[str],
     values: Float[Array, " P"],
@@ -205,10 +216,7 @@ def window_residuals(
 ) -> Float[Array, " W"]:
     """Per window: the simulated minus the measured mean speed (m/s) over the horizon of the
     people counted (module docstring); 0 where nobody is counted."""
-    params, speed, radius = parameter_values(
-        names, values, AvoidanceParams() if base is None else base
-    )
-    end, _ = _end_positions(params, speed, radius, batch)
+    end = _simulated_ends(names, values, batch, base)
     horizon = batch.steps * DT
 
     def speeds(at: Array) -> Array:
@@ -229,10 +237,7 @@ def person_residuals(
     """Per window and person counted: the simulated minus the measured mean velocity (m/s,
     both components: the end positions' difference ÷ the horizon); 0 for everyone else
     (module docstring)."""
-    params, speed, radius = parameter_values(
-        names, values, AvoidanceParams() if base is None else base
-    )
-    end, _ = _end_positions(params, speed, radius, batch)
+    end = _simulated_ends(names, values, batch, base)
     return jnp.where(batch.counted[..., None], (end - batch.end) / (batch.steps * DT), 0.0)
 
 
