@@ -154,7 +154,7 @@ def _calibrate(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def params_toml(result: dict[str, Any]) -> str:
-    """The parameters file: ``[avoidance]``, ``[population]`` and ``[calibration]``."""
+    """The parameters file: ``[avoidance]``, ``[body]``, ``[population]`` and ``[calibration]``."""
     from jcrowd.crowd.calibrate import EXTRA_NAMES, RADIUS_NAME, SPEED_NAME
 
     fitted = result["fitted"]
