@@ -226,19 +226,18 @@ class _Reader:
             )
         if set(body) - {"radius"}:
             self.fail(at, f"{path}: body: expected only radius, found keys {sorted(body)}")
-        pairs = []
-        for name, v in [*table.items(), *(("body." + k, x) for k, x in body.items())]:
+        numbers = {f"avoidance.{k}": v for k, v in table.items()}
+        numbers |= {f"body.{k}": v for k, v in body.items()}
+        for key, v in numbers.items():
             ok = isinstance(v, int | float) and not isinstance(v, bool) and 0 < v < float("inf")
             if not ok:
-                where = name if name.startswith("body.") else f"avoidance.{name}"
-                self.fail(at, f"{path}: {where}: expected a positive number, found {show(v)}")
-            pairs.append((str(name), float(v)))
-        radius = dict(pairs).pop("body.radius", None)
+                self.fail(at, f"{path}: {key}: expected a positive number, found {show(v)}")
+        radius = float(body["radius"]) if "radius" in body else None
         if radius is not None and not 0.1 <= radius <= 0.4:
             self.fail(
                 at, f"{path}: body.radius: expected a radius in [0.1, 0.4] (m), found {radius}"
             )
-        return str(path), tuple(p for p in pairs if not p[0].startswith("body.")), radius
+        return str(path), tuple((str(k), float(v)) for k, v in table.items()), radius
 
 
 def _join(path: str, key: str) -> str:
