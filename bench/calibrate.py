@@ -2,7 +2,8 @@
 item 2).
 
 - **Fit**: :func:`jcrowd.crowd.calibrate.calibrate` (short windows from the measured states,
-  Levenberg–Marquardt on the logarithms) from three starts: every fitted parameter ×1.3, ×0.7,
+  the coarse grid's best point or the start, then Levenberg–Marquardt on the logarithms;
+  ``--no-search``: from the start) from three starts: every fitted parameter ×1.3, ×0.7,
   and alternately ×1.3 / ×0.7 of the model's default (``--names``; ×1.15 third for one name).
 - **Judge**: each fit's parameters run the crowd-dynamics bench's fundamental-diagram section
   (``bench/pedestrians.py``: each run re-simulated from its measured entry times, PedPy's
@@ -14,7 +15,7 @@ item 2).
   three fits' median.
 
 ``python bench/calibrate.py [--names time_gap,radius] [--residual person|speed] [--horizon 0.5]
-[--every 1.0] [--max-steps 100] [--json] [--no-record]``
+[--every 1.0] [--max-steps 100] [--no-search] [--json] [--no-record]``
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from common import machine, report
 
 from jcrowd.crowd.avoidance import AvoidanceParams
 from jcrowd.crowd.calibrate import (
+    COARSE_GRID,
     EXTRA_NAMES,
     RADIUS_NAME,
     SPEED_NAME,
@@ -91,6 +93,7 @@ def main() -> None:
     ap.add_argument("--every", type=float, default=1.0, help="seconds between windows")
     ap.add_argument("--residual", default="person", choices=("person", "speed"))
     ap.add_argument("--max-steps", type=int, default=100)
+    ap.add_argument("--no-search", action="store_true", help="LM from the start, no grid")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--no-record", action="store_true")
     args = ap.parse_args()
@@ -127,7 +130,13 @@ def main() -> None:
     for fac in factors:
         start = {n: base[n] * f for n, f in zip(names, fac, strict=True)}
         t1 = time.perf_counter()
-        cal = calibrate(batches, start, max_steps=args.max_steps, residual=args.residual)
+        cal = calibrate(
+            batches,
+            start,
+            max_steps=args.max_steps,
+            residual=args.residual,
+            grid=None if args.no_search else COARSE_GRID,
+        )
         fit_s = time.perf_counter() - t1
         fitted = dict(zip(names, map(float, cal.values), strict=True))
         params = defaults
@@ -143,8 +152,12 @@ def main() -> None:
         fits.append(
             {
                 "start": {n: round(v, 4) for n, v in start.items()},
+                "searched_from": {
+                    n: round(float(v), 4) for n, v in zip(names, cal.searched_from, strict=True)
+                },
                 "fitted": {n: round(v, 4) for n, v in fitted.items()},
                 "window_rms_start_m_s": round(cal.rms_start, 4),
+                "window_rms_searched_m_s": round(cal.rms_searched, 4),
                 "window_rms_m_s": round(cal.rms, 4),
                 "steps": cal.steps,
                 "converged": cal.converged,
@@ -163,6 +176,7 @@ def main() -> None:
         "horizon_s": args.horizon,
         "every_s": args.every,
         "residual": args.residual,
+        "search": not args.no_search,
         "windows": int(sum(b.position.shape[0] for b in batches)),
         "fd_speed_rmse_default_m_s": round(rmse_default, 3),
         "fd_measured_speeds": {r[0]: round(r[1], 3) for r in rows_default},
@@ -175,16 +189,20 @@ def main() -> None:
         "seconds": round(time.perf_counter() - t0, 1),
     }
     lines = [
-        f"names {', '.join(names)}; {args.residual} residuals; horizon {args.horizon} s every "
-        f"{args.every} s; "
+        f"names {', '.join(names)}; {args.residual} residuals; "
+        f"{'coarse grid then LM' if out['search'] else 'LM from the start'}; "
+        f"horizon {args.horizon} s every {args.every} s; "
         f"{out['windows']} windows; "
         f"defaults' fd_speed_rmse {out['fd_speed_rmse_default_m_s']} m/s",
         "",
-        "| start | fitted | window RMS (m/s) | LM steps | fd_speed_rmse (m/s) |",
-        "|---|---|---|---|---|",
+        "| start | LM started from | fitted | window RMS (m/s) | LM steps | fit s | "
+        "fd_speed_rmse (m/s) |",
+        "|---|---|---|---|---|---|---|",
         *(
-            f"| {f['start']} | {f['fitted']} | {f['window_rms_start_m_s']} → "
-            f"{f['window_rms_m_s']} | {f['steps']} | {f['fd_speed_rmse_m_s']} |"
+            f"| {f['start']} | {f['searched_from']} | {f['fitted']} | "
+            f"{f['window_rms_start_m_s']} → {f['window_rms_searched_m_s']} → "
+            f"{f['window_rms_m_s']} | {f['steps']} | {f['fit_seconds']} | "
+            f"{f['fd_speed_rmse_m_s']} |"
             for f in fits
         ),
         "",

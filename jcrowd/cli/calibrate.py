@@ -14,8 +14,11 @@ written (atomically) to ``--out`` as TOML: ``[avoidance]`` (what a scenario's ``
 params = "params.toml"`` sets), ``[body]`` (a fitted ``radius``: that scenario's ``[dynamics]
 radius`` unless it names its own), ``[population]`` (the fitted free speed: set your groups'
 ``speed`` to it to walk like the measured people) and ``[calibration]`` (the runs, the start,
-the residuals). ``--json`` prints one object: the start and fitted values, the residual RMS
-before and after, the steps, the Jacobian's singular values and the seconds taken.
+the residuals). Levenberg–Marquardt starts at the best point of a coarse grid
+(:data:`jcrowd.crowd.calibrate.COARSE_GRID`) and the start (``--no-search``: at the start).
+``--json`` prints one object: the start, the point the fit started from
+(``searched_from``) and the fitted values, the residual RMS at each, the steps, the Jacobian's
+singular values and the seconds taken.
 """
 
 from __future__ import annotations
@@ -57,6 +60,11 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--horizon", type=float, default=0.5, help="seconds simulated per window")
     p.add_argument("--every", type=float, default=1.0, help="seconds between windows")
     p.add_argument("--max-steps", type=int, default=100, help="Levenberg–Marquardt steps at most")
+    p.add_argument(
+        "--no-search",
+        action="store_true",
+        help="start Levenberg–Marquardt at the start values, not at the coarse grid's best",
+    )
     return p
 
 
@@ -101,7 +109,7 @@ def _calibrate(args: argparse.Namespace) -> dict[str, Any]:
     from rich.console import Console
     from rich.progress import Progress
 
-    from jcrowd.crowd.calibrate import calibrate, make_windows, merge_windows
+    from jcrowd.crowd.calibrate import COARSE_GRID, calibrate, make_windows, merge_windows
     from jcrowd.errors import JcrowdError
     from jcrowd.io.atomic import write_atomic
     from jcrowd.io.trajectories import load_hermes_runs
@@ -130,7 +138,11 @@ def _calibrate(args: argparse.Namespace) -> dict[str, Any]:
             progress.advance(task)
         progress.update(task, description="fitting (compile, then Levenberg–Marquardt)")
         cal = calibrate(
-            merge_windows(batches), start, max_steps=args.max_steps, residual=args.residual
+            merge_windows(batches),
+            start,
+            max_steps=args.max_steps,
+            residual=args.residual,
+            grid=None if args.no_search else COARSE_GRID,
         )
         progress.advance(task)
     result = {
@@ -140,8 +152,12 @@ def _calibrate(args: argparse.Namespace) -> dict[str, Any]:
         "residual": args.residual,
         "names": list(cal.names),
         "start": dict(zip(cal.names, (round(float(v), 6) for v in cal.start), strict=True)),
+        "searched_from": dict(
+            zip(cal.names, (round(float(v), 4) for v in cal.searched_from), strict=True)
+        ),
         "fitted": dict(zip(cal.names, (round(float(v), 4) for v in cal.values), strict=True)),
         "residual_rms_start_m_s": round(cal.rms_start, 4),
+        "residual_rms_searched_m_s": round(cal.rms_searched, 4),
         "residual_rms_m_s": round(cal.rms, 4),
         "steps": cal.steps,
         "converged": cal.converged,
@@ -171,6 +187,7 @@ def params_toml(result: dict[str, Any]) -> str:
         f"horizon_s = {result['horizon_s']!r}",
         f"residual = {result['residual']!r}",
         f"residual_rms_start_m_s = {result['residual_rms_start_m_s']!r}",
+        f"residual_rms_searched_m_s = {result['residual_rms_searched_m_s']!r}",
         f"residual_rms_m_s = {result['residual_rms_m_s']!r}",
         f"steps = {result['steps']}",
     ]
@@ -179,7 +196,10 @@ def params_toml(result: dict[str, Any]) -> str:
 
 def _print(result: dict[str, Any]) -> None:
     for name in result["names"]:
-        print(f"{name:>22}: {result['start'][name]:.4g} -> {result['fitted'][name]:.4g}")
+        print(
+            f"{name:>22}: {result['start'][name]:.4g} (searched from "
+            f"{result['searched_from'][name]:.4g}) -> {result['fitted'][name]:.4g}"
+        )
     print(
         f"residual RMS {result['residual_rms_start_m_s']:.4f} -> {result['residual_rms_m_s']:.4f} "
         f"m/s over {result['windows']} windows of {len(result['data'])} runs, "

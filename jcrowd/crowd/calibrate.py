@@ -76,7 +76,8 @@ centred in a 0.2 m wall at ``y = -4`` and the target 2.5 m behind it; the measur
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import itertools
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -246,6 +247,16 @@ RESIDUALS = ("person", "speed")
 counted people's mean speed (:func:`window_residuals`)."""
 
 
+COARSE_GRID: dict[str, tuple[float, ...]] = {
+    "time_gap": tuple(round(float(t), 3) for t in np.geomspace(0.2, 1.2, 7)),
+    RADIUS_NAME: (0.10, 0.14, 0.18, 0.22, 0.26, 0.30),
+    SPEED_NAME: (1.0, 1.2, 1.4, 1.6, 1.8),
+}
+"""Where the fit looks before Levenberg–Marquardt (module docstring, "Where the fit starts"):
+per parameter the values tried (``time_gap`` 0.2–1.2 s, ``radius`` 0.10–0.30 m, free speed
+1.0–1.8 m/s); a fitted parameter not listed is tried at its start value only."""
+
+
 @dataclass(frozen=True)
 class Calibration:
     """A fit's outcome.
@@ -258,6 +269,9 @@ class Calibration:
         converged: optimistix reported success.
         singular_values: of the residuals' Jacobian in the log-parameters at the fit (how well
             each direction is determined; a tiny one is a direction the data do not fix).
+        searched_from: where Levenberg–Marquardt started: the best of the coarse grid and the
+            start (the start itself where the search is off).
+        rms_searched: the residual RMS there (m/s).
     """
 
     names: tuple[str, ...]
@@ -268,6 +282,8 @@ class Calibration:
     steps: int
     converged: bool
     singular_values: np.ndarray
+    searched_from: np.ndarray
+    rms_searched: float
 
 
 def _all_residuals(
@@ -279,9 +295,14 @@ def _all_residuals(
 
 
 def _fn(y: Array, args: tuple[tuple[WindowBatch, ...], tuple[str, ...], str]) -> Array:
-    """The residuals in the log-parameters; one function object, so optimistix's compiled
-    solve is reused across calls with batches of the same shapes."""
+    """The residuals in the log-parameters; one function object, so optimistix's compiled solve
+    is reused across calls with batches of the same shapes."""
     return _all_residuals(y, *args)
+
+
+@eqx.filter_jit
+def _rms(y: Array, args: tuple[tuple[WindowBatch, ...], tuple[str, ...], str]) -> Array:
+    return jnp.sqrt(jnp.mean(_fn(y, args) ** 2))
 
 
 def calibrate(
@@ -292,14 +313,16 @@ def calibrate(
     rtol: float = 1e-4,
     atol: float = 1e-5,
     residual: str = "person",
+    grid: Mapping[str, Sequence[float]] | None = COARSE_GRID,
 ) -> Calibration:
-    """Fit the parameters named in ``start`` (from those values) to every batch's windows by
-    Levenberg–Marquardt on their logarithms (module docstring); ``residual`` is one of
-    :data:`RESIDUALS`.
+    """Fit the parameters named in ``start`` to every batch's windows: the residual RMS at every
+    point of ``grid`` (its values for the named parameters, each combination; ``None``: no
+    search) and at ``start``, then Levenberg–Marquardt on the logarithms from the best of them
+    (module docstring); ``residual`` is one of :data:`RESIDUALS`.
 
     Raises:
-        JcrowdError: unknown or repeated names, a start value that is not positive and finite,
-            no batch, or an unknown ``residual``.
+        JcrowdError: unknown or repeated names, a start or grid value that is not positive and
+            finite, no batch, or an unknown ``residual``.
     """
     names = tuple(start)
     _check_names(names)
@@ -308,23 +331,33 @@ def calibrate(
     x0 = np.array([start[n] for n in names], np.float64)
     if not np.all(np.isfinite(x0) & (x0 > 0)):
         raise JcrowdError(f"calibrate: expected positive start values, found {start}")
+    axes = [tuple(grid[n]) if grid and n in grid else (start[n],) for n in names]
+    for name, values in zip(names, axes, strict=True):
+        a = np.asarray(values, np.float64)
+        if a.ndim != 1 or a.size == 0 or not np.all(np.isfinite(a) & (a > 0)):
+            raise JcrowdError(
+                f"calibrate: grid[{name!r}]: expected positive values, found {values}"
+            )
     if not batches:
         raise JcrowdError("calibrate: expected at least one run's windows, found none")
-    group = tuple(batches)
+    args = (tuple(batches), names, residual)
     y0 = jnp.log(jnp.asarray(x0, jnp.float32))
-
-    args = (group, names, residual)
+    rms_start = float(_rms(y0, args))
+    ys = [y0, *(jnp.log(jnp.asarray(p, jnp.float32)) for p in itertools.product(*axes))]
+    rms = [rms_start, *(float(_rms(y, args)) for y in ys[1:])]
+    best = int(np.argmin(rms))  # the first of equals: the start when it ties
     solver: Any = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    sol: Any = optx.least_squares(_fn, solver, y0, args, max_steps=max_steps, throw=False)
-    r0, r1 = _fn(y0, args), _fn(sol.value, args)
+    sol: Any = optx.least_squares(_fn, solver, ys[best], args, max_steps=max_steps, throw=False)
     jac = jax.jacfwd(_fn)(sol.value, args)
     return Calibration(
         names,
         x0,
         np.exp(np.asarray(sol.value, np.float64)),
-        float(jnp.sqrt(jnp.mean(r0**2))),
-        float(jnp.sqrt(jnp.mean(r1**2))),
+        rms_start,
+        float(_rms(sol.value, args)),
         int(sol.stats["num_steps"]),
         bool(sol.result == optx.RESULTS.successful),
         np.linalg.svd(np.asarray(jac, np.float64), compute_uv=False),
+        np.exp(np.asarray(ys[best], np.float64)),
+        rms[best],
     )
