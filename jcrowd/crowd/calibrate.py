@@ -2,7 +2,8 @@
 
 The collision-free speed model's parameters (:class:`~jcrowd.crowd.avoidance.AvoidanceParams`),
 the body radius ``r`` and the free walking speed ``v0`` are fitted to measured runs by
-Levenberg–Marquardt (optimistix) through differentiable rollouts (:mod:`jcrowd.crowd.rollout`).
+Levenberg–Marquardt (optimistix) through differentiable rollouts (:mod:`jcrowd.crowd.rollout`),
+started at the best point of a coarse grid.
 
 Readings taken, and why:
 
@@ -37,24 +38,32 @@ Readings taken, and why:
   short ``T`` (0.28 s), which let the corridor without a bottleneck (``uo-180-180-180``) carry
   the measured flow at a lower density and a higher speed than the congested crowd measured
   there (fundamental-diagram speed RMSE 0.136–0.141 m/s, no better than the defaults' 0.138
-  m/s). Fitted together from three starts on windows every 1 s (``bench/calibrate.py``, row
-  "calibrate — 2026-12-06 — code 441c356"): (``T``, ``r``) = (0.387 s, 0.193 m), (0.598, 0.143),
-  (0.627, 0.138), and every fit's free run beats the defaults' fundamental diagram: speed RMSE
-  0.113, 0.079, 0.098 m/s against 0.138 m/s (every 2 s, row "… code 2d51885": (0.483, 0.158),
-  (0.609, 0.139), (0.624, 0.138) and 0.097, 0.107, 0.088). **Not met: stability** (35 % from the
-  median). Two starts agree within 5 %; the third (×1.3 of both) stops early at a worse
-  objective (window RMS 0.083 against 0.072 m/s). The per-person objective has one broad valley,
-  ``T`` rising as ``r`` falls, nearly flat along it (every 2 s, on a grid: RMS within 1.5 % from
-  (0.48, 0.16) to (0.68, 0.13), lowest near (0.60–0.68, 0.13–0.14), falling monotonically from
-  the early stop towards the others), and ``r`` enters Eq. 3 through a hard set — who is in the
-  corridor ahead — so the objective is a staircase in ``r`` that the pathwise derivative does
-  not see: Levenberg–Marquardt's steps along the valley are rejected and it reports convergence
-  on a step's edge (there the Jacobian's largest singular value was 2409 against 50 at the
-  others). Which edge is path-dependent: the same ×1.3 start in a separate process reached
-  (0.571, 0.148) in 77 steps; every 2 s, tighter tolerances stopped it at (0.35, 0.20) and a
-  restart from (0.483, 0.158) moved it only to (0.51, 0.16). On the model's own trajectories,
-  where the valley is sharp, ``T``, ``r`` and ``v0`` are recovered within 1 % from ±30 %
-  (``tests/test_calibrate.py``).
+  m/s).
+- **Where the fit starts: the best point of a coarse grid** (:data:`COARSE_GRID`). The
+  per-person objective has one broad valley, ``T`` rising as ``r`` falls, nearly flat along it
+  (every 2 s, on a grid: RMS within 1.5 % from (0.48, 0.16) to (0.68, 0.13)), and ``r`` enters
+  Eq. 3 through a hard set — who is in the corridor ahead — so the objective is a staircase in
+  ``r`` that the pathwise derivative does not see: Levenberg–Marquardt's steps along the valley
+  are rejected and it reports convergence on a step's edge (there the Jacobian's largest
+  singular value was 2409 against 50 elsewhere). Started at the bench's three starts (×1.3,
+  ×0.7, ×1.3/×0.7 of ``T`` = 0.6 s, ``r`` = 0.2 m), it ended at (0.387 s, 0.193 m), (0.598,
+  0.143) and (0.627, 0.138): 35 % apart (row "calibrate — 2026-12-06 — code 441c356"; the same
+  ×1.3 start reached (0.571, 0.148) in another process). So :func:`calibrate` first evaluates
+  the residual RMS at the start and at every point of the grid (42 for ``T`` and ``r``: 61 s on
+  2 cores, 1.07 s an evaluation of 268 windows) and starts from the least; the gradient then
+  does the fitting (the grid's best, (0.66 s, 0.14 m) at RMS 0.0724 m/s, is 10 % from the fit
+  in ``T``; started from its neighbours in ``T``, (0.42, 0.14) and (0.78, 0.14), the fit ends
+  within 5 % of it, at (0.598, 0.143) and (0.627, 0.138): the grid's spacing does not decide
+  the answer). That point beats each of the three starts (RMS 0.140, 0.080, 0.076), so all
+  three give the same fit, (``T``, ``r``) = (0.602 s, 0.142 m) at RMS 0.0721, whose free run
+  matches the fundamental diagram better than the defaults: speed RMSE 0.094 against 0.138 m/s
+  (row "… code 9a0969a"). Reading taken: a global look at a two-parameter objective before a local
+  fit is the usual cure for a rough one; a start still wins where it beats every grid point
+  (a user's better guess is kept), and ``--no-search`` skips the grid. Tried and dropped: a
+  profile in ``r`` (a 1 cm grid, ``T`` fitted by Levenberg–Marquardt at each): each 1-D fit
+  took 14–15 steps even from its optimum (150–220 s), about 1.5 h a fit. On the model's own
+  trajectories, where the valley is sharp, ``T``, ``r`` and ``v0`` are recovered from ±30 %
+  without the grid (measured within 1 %; ``tests/test_calibrate.py`` bounds it at 5 %).
 - **What else was tried.** Fitting ``desired_speed`` moves it to 1.46 m/s, faster than the
   free-flow runs' measured 1.34–1.39 m/s, and worsens the fundamental diagram (0.158–0.183
   m/s); adding ``plain_reaction_time`` is degenerate (``T`` → 0.005 s, ``τ`` → 1.4 s absorb
