@@ -354,7 +354,8 @@ def calibrate(
     rms_start = float(_rms(y0, args))
     ys = [y0, *(jnp.log(jnp.asarray(p, jnp.float32)) for p in itertools.product(*axes))]
     rms = [rms_start, *(float(_rms(y, args)) for y in ys[1:])]
-    best = int(np.argmin(rms))  # the first of equals: the start when it ties
+    # The first of equals (the start when it ties); a point whose rollout is not finite loses.
+    best = int(np.argmin(np.where(np.isfinite(rms), rms, np.inf)))
     solver: Any = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     sol: Any = optx.least_squares(_fn, solver, ys[best], args, max_steps=max_steps, throw=False)
     jac = jax.jacfwd(_fn)(sol.value, args)
