@@ -344,7 +344,7 @@ def test_cli_fits_one_run_and_writes_a_file_a_scenario_takes(
     # The fit started at the best of the start and the coarse grid's time gaps.
     assert result["searched_from"]["time_gap"] in (0.78, *COARSE_GRID["time_gap"])
     assert result["residual_rms_searched_m_s"] <= result["residual_rms_start_m_s"]
-    # Four LM steps from T = 0.78 s on this run's 19 windows lower the per-person residual.
+    # Four LM steps from there on this run's 19 windows lower the per-person residual.
     assert result["residual_rms_m_s"] < 0.8 * result["residual_rms_start_m_s"], result
     fitted = result["fitted"]["time_gap"]
     assert 0.05 < fitted < 0.78

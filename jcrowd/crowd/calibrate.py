@@ -340,7 +340,8 @@ def calibrate(
     x0 = np.array([start[n] for n in names], np.float64)
     if not np.all(np.isfinite(x0) & (x0 > 0)):
         raise JcrowdError(f"calibrate: expected positive start values, found {start}")
-    axes = [tuple(grid[n]) if grid and n in grid else (start[n],) for n in names]
+    grid = {n: grid[n] for n in names if n in grid} if grid else {}
+    axes = [tuple(grid[n]) if n in grid else (start[n],) for n in names]
     for name, values in zip(names, axes, strict=True):
         a = np.asarray(values, np.float64)
         if a.ndim != 1 or a.size == 0 or not np.all(np.isfinite(a) & (a > 0)):
@@ -352,7 +353,8 @@ def calibrate(
     args = (tuple(batches), names, residual)
     y0 = jnp.log(jnp.asarray(x0, jnp.float32))
     rms_start = float(_rms(y0, args))
-    ys = [y0, *(jnp.log(jnp.asarray(p, jnp.float32)) for p in itertools.product(*axes))]
+    points = itertools.product(*axes) if grid else ()  # no grid for any name: the start only
+    ys = [y0, *(jnp.log(jnp.asarray(p, jnp.float32)) for p in points)]
     rms = [rms_start, *(float(_rms(y, args)) for y in ys[1:])]
     # The first of equals (the start when it ties); a point whose rollout is not finite loses.
     best = int(np.argmin(np.where(np.isfinite(rms), rms, np.inf)))
