@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from jcrowd.crowd.synthesis import Decoders, _chain, build_decoders
+from jcrowd.crowd.synthesis import Decoders, build_decoders
 from jcrowd.model.motion_model import MotionModel
 from jcrowd.motion.body import BoundBody
 from jcrowd.motion.rotation import quat_mul
+from jcrowd.motion.skeleton import kept_ancestor_frame
 from jcrowd.motion.skinning import SkinnedLevel, SkinnedMesh, level_skin
 
 __all__ = ["skinned_levels"]
@@ -38,7 +39,7 @@ def skinned_levels(
         f_pos = np.zeros((skel.num_joints, 3))
         for j in range(skel.num_joints):
             if j not in kept_set:
-                _, rot, off = _chain(skel, reference, kept_set, j)
+                _, rot, off = kept_ancestor_frame(skel, reference, kept_set, j)
                 f_rot[j] = quat_mul(rot, reference[j])
                 f_pos[j] = off
         meshes = []

@@ -40,7 +40,7 @@ from jaxtyping import Array, Float
 from jcrowd.kriging.universal import KrigingModel, kriging_weights
 from jcrowd.model.motion_model import MotionModel
 from jcrowd.motion.rotation import quat_from_expmap, quat_mul, quat_rotate, quat_to_matrix, yaw_quat
-from jcrowd.motion.skeleton import Skeleton, forward_kinematics
+from jcrowd.motion.skeleton import Skeleton, forward_kinematics, kept_ancestor_frame
 
 __all__ = [
     "Decoders",
@@ -126,26 +126,6 @@ class Decoders(eqx.Module):
         return int((lv.cores if lv.mix_basis is None else lv.mix_basis).shape[0])
 
 
-def _chain(
-    skeleton: Skeleton, reference: np.ndarray, kept: set[int], j: int
-) -> tuple[int, np.ndarray, np.ndarray]:
-    """Nearest kept ancestor of ``j``; the rotation of ``j``'s parent frame and ``j``'s position,
-    both in that ancestor's frame, through dropped joints (each at its reference rotation)."""
-    path = []
-    p = skeleton.parents[j]
-    while p not in kept:
-        path.append(p)
-        p = skeleton.parents[p]
-    rot = np.array([1.0, 0.0, 0.0, 0.0])
-    off = np.zeros(3)
-    offsets = np.asarray(skeleton.offsets, np.float64)
-    for d in reversed(path):  # from just below the kept ancestor down to j's parent
-        off = off + quat_rotate(rot, offsets[d])
-        rot = quat_mul(rot, reference[d])
-    off = off + quat_rotate(rot, offsets[j])
-    return p, rot, off
-
-
 def _level_decoder(model: MotionModel, level: int) -> LevelDecoder:
     lv = model.levels[level]
     k = lv.kriging
@@ -165,7 +145,7 @@ def _level_decoder(model: MotionModel, level: int) -> LevelDecoder:
     offsets = [np.asarray(skel.offsets, np.float64)[0]]
     local_ref = [np.array([1.0, 0.0, 0.0, 0.0])]
     for j in kept[1:]:
-        anc, rot, off = _chain(skel, reference, kept_set, j)
+        anc, rot, off = kept_ancestor_frame(skel, reference, kept_set, j)
         parents.append(kept.index(anc))
         offsets.append(off)
         local_ref.append(quat_mul(rot, reference[j]))
@@ -177,7 +157,7 @@ def _level_decoder(model: MotionModel, level: int) -> LevelDecoder:
             anchor.append(kept.index(j))
             point_offset.append(np.zeros(3))
         else:
-            anc, _, off = _chain(skel, reference, kept_set, j)
+            anc, _, off = kept_ancestor_frame(skel, reference, kept_set, j)
             anchor.append(kept.index(anc))
             point_offset.append(off)
     for parent, end in ends:
@@ -187,7 +167,7 @@ def _level_decoder(model: MotionModel, level: int) -> LevelDecoder:
             anchor.append(kept.index(parent))
             point_offset.append(end)
         else:
-            anc, rot, off = _chain(skel, reference, kept_set, parent)
+            anc, rot, off = kept_ancestor_frame(skel, reference, kept_set, parent)
             anchor.append(kept.index(anc))
             point_offset.append(off + quat_rotate(quat_mul(rot, reference[parent]), end))
     names = tuple(skel.names[j] for j in kept)

@@ -52,6 +52,7 @@ from jcrowd.motion.skeleton import bone_lengths as bone_lengths
 from jcrowd.motion.skeleton import end_site_positions as end_site_positions
 from jcrowd.motion.skeleton import forward_kinematics as forward_kinematics
 from jcrowd.motion.skeleton import joint_bone_lengths as joint_bone_lengths
+from jcrowd.motion.skeleton import kept_ancestor_frame as kept_ancestor_frame
 from jcrowd.motion.skeleton import rest_positions as rest_positions
 from jcrowd.motion.walker import STANCE_FRACTION as STANCE_FRACTION
 from jcrowd.motion.walker import WalkTruth as WalkTruth

@@ -34,6 +34,7 @@ __all__ = [
     "end_site_positions",
     "forward_kinematics",
     "joint_bone_lengths",
+    "kept_ancestor_frame",
     "rest_positions",
 ]
 
@@ -237,6 +238,27 @@ def rest_positions(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
     eo = np.asarray(skeleton.end_offsets_or_empty(), np.float64)
     ends = pos[np.asarray(skeleton.end_parents, np.int64)] + eo if len(eo) else np.zeros((0, 3))
     return pos, ends
+
+
+def kept_ancestor_frame(
+    skeleton: Skeleton, reference: np.ndarray, kept: set[int], j: int
+) -> tuple[int, np.ndarray, np.ndarray]:
+    """The nearest kept ancestor of joint ``j`` when only the joints ``kept`` move, with the
+    rotation of ``j``'s parent frame and ``j``'s position, both in that ancestor's frame: the
+    dropped joints between them hold their ``reference`` rotations ``(J, 4)`` (NumPy, host)."""
+    path = []
+    p = skeleton.parents[j]
+    while p not in kept:
+        path.append(p)
+        p = skeleton.parents[p]
+    rot = np.array([1.0, 0.0, 0.0, 0.0])
+    off = np.zeros(3)
+    offsets = np.asarray(skeleton.offsets, np.float64)
+    for d in reversed(path):  # from just below the kept ancestor down to j's parent
+        off = off + quat_rotate(rot, offsets[d])
+        rot = quat_mul(rot, reference[d])
+    off = off + quat_rotate(rot, offsets[j])
+    return p, rot, off
 
 
 def bone_lengths(skeleton: Skeleton) -> Float[ArrayLike, " J"]:
