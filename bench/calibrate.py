@@ -1,7 +1,7 @@
 """Calibration of the dynamics to the six HERMES runs, judged by the fundamental diagram (issue 22,
 item 2).
 
-- **Fit**: :func:`jcrowd.crowd.calibrate.calibrate` (short windows from the measured states,
+- **Fit**: :func:`jcrowd.rollouts.calibrate.calibrate` (short windows from the measured states,
   the coarse grid's best point or the start, then Levenberg–Marquardt on the logarithms;
   ``--no-search``: from the start) from three starts: every fitted parameter ×1.3, ×0.7,
   and alternately ×1.3 / ×0.7 of the model's default (``--names``; ×1.15 third for one name).
@@ -33,18 +33,17 @@ import pandas as pd
 import pedestrians as ped
 from common import machine, report
 
-from jcrowd.crowd.avoidance import AvoidanceParams
-from jcrowd.crowd.calibrate import (
+from jcrowd.io.trajectories import load_hermes_runs
+from jcrowd.pedestrians.params import AvoidanceParams
+from jcrowd.rollouts.calibrate import (
     COARSE_GRID,
     EXTRA_NAMES,
     RADIUS_NAME,
     SPEED_NAME,
     calibrate,
-    make_windows,
-    merge_windows,
     window_residuals,
 )
-from jcrowd.io.trajectories import load_hermes_runs
+from jcrowd.rollouts.windows import make_windows, merge_windows
 
 
 def fd_rmse(folder, params, speed, radius=ped.RADIUS):

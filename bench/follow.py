@@ -66,10 +66,10 @@ from common import ROOT, data_root, machine, report
 
 from jcrowd import load_default_model
 from jcrowd.cli.run import simulate
-from jcrowd.crowd import agent_motion, prepare
+from jcrowd.crowd import prepare
 from jcrowd.crowd.level_blend import BLEND_SECONDS
 from jcrowd.io import load_dataset
-from jcrowd.model import foot_skate
+from jcrowd.model import agent_motion, foot_skate
 from jcrowd.motion.clip import joint_positions
 from jcrowd.motion.gait import find_feet
 from jcrowd.scenario import load_scenario

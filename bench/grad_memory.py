@@ -6,10 +6,10 @@ grid at about 1 /m² behind the door; the rearmost fifth are a source, let go fr
 10 /s. Desired speeds vary from 1.2 to 1.5 m/s, so people catch up and follow. Over
 ``--steps`` steps of 1/30 s (default 600, 20 s) the front passes the door and an exit line 1 m
 past it. A unidirectional flow at this density does not jam (see the note in
-:mod:`jcrowd.crowd.rollout`: in a jam the pathwise gradient grows about 1.5× per step).
+:mod:`jcrowd.rollouts.rollout`: in a jam the pathwise gradient grows about 1.5× per step).
 
 Measured: the gradient of ``soft count through the line at T + mean travel time`` with respect
-to every parameter kind of :class:`~jcrowd.crowd.rollout.RolloutParams` (float32),
+to every parameter kind of :class:`~jcrowd.rollouts.rollout.RolloutParams` (float32),
 
 - ``peak_bytes``: the compiled gradient's arguments + outputs + temporaries − aliased buffers
   (XLA's buffer assignment, ``compiled.memory_analysis()``): the memory the gradient itself
@@ -42,10 +42,10 @@ import numpy as np
 import shapely
 from common import machine, report
 
-from jcrowd.crowd import AvoidanceParams, Pedestrians, build_world
-from jcrowd.crowd.rollout import (
+from jcrowd.pedestrians import AvoidanceParams, Pedestrians, build_world
+from jcrowd.rollouts.doors import find_door
+from jcrowd.rollouts.rollout import (
     RolloutSetup,
-    find_door,
     initial_params,
     mean_travel_time,
     rollout,

@@ -4,17 +4,17 @@ The scene: ``examples/two_exits.toml``, a room emptying through two doors that s
 doorway; the varied number is the middle wall piece's x (``obstacles[1].center[0]``), which
 widens one door by what it takes from the other, within ``--bounds`` (default 4.6 … 5.5 m:
 door A 0.6 … 1.5 m). The objective (``--objective``, default ``travel_time``) is
-:func:`jcrowd.crowd.layout_opt.layout_objective`.
+:func:`jcrowd.rollouts.layout_opt.layout_objective`.
 
 - **Grid**: ``--grid`` forward simulations at evenly spaced values over the bounds (the world
   and its navigation field rebuilt at each), the best taken.
-- **Gradient**: :func:`~jcrowd.crowd.layout_opt.projected_gradient` from the scenario as written
+- **Gradient**: :func:`~jcrowd.rollouts.layout_opt.projected_gradient` from the scenario as written
   (door widths 1 m / 1 m), at most ``--evaluations`` value-and-gradient evaluations. Counted
   as one simulation each in ``gradient simulations``; ``forward-equivalents`` is the same
   count times the measured time of a value-and-gradient over a forward run (the backward pass
   and the checkpoints' recomputation), the honest cost in forward runs.
 - The gradient optimum is evaluated again with the grid's forward objective
-  (:func:`~jcrowd.crowd.layout_opt.forward_value`); Done-when: that value within 5 % of the
+  (:func:`~jcrowd.rollouts.layout_opt.forward_value`); Done-when: that value within 5 % of the
   grid's best with at least 10× fewer simulations.
 - Compile (first call, trace + XLA) and run (median of the calls after it) are timed apart.
 
@@ -35,13 +35,9 @@ import jax
 import numpy as np
 from common import ROOT, machine, report
 
-from jcrowd.crowd.layout_opt import (
-    forward_value,
-    layout_problem,
-    projected_gradient,
-    value_and_gradient,
-    varied_parameter,
-)
+from jcrowd.rollouts.layout_opt import forward_value, layout_problem, value_and_gradient
+from jcrowd.rollouts.search import projected_gradient
+from jcrowd.scenario.keys import varied_parameter
 from jcrowd.scenario.parse import load_scenario
 
 SCENE = ROOT / "examples" / "two_exits.toml"

@@ -74,14 +74,14 @@ import shapely
 from common import ROOT, machine, report
 
 from jcrowd.cli.run import use_cpu_devices
-from jcrowd.crowd import (
+from jcrowd.pedestrians import (
     AvoidanceParams,
     Pedestrians,
     build_world,
     pedestrian_step,
     split_pedestrian_step,
 )
-from jcrowd.crowd.calibrate import corridor_scene
+from jcrowd.rollouts.windows import corridor_scene
 
 DATA = ROOT.parent / "shared" / "data" / "pedestrians"
 DT = 1.0 / 30.0
@@ -392,7 +392,7 @@ def _entrance_density(pos, alive, area, times):
 
 
 HERMES_AREA = corridor_scene(1.8, 1.8)[0]
-"""The HERMES corridor (1.8 m) with its rooms: jcrowd.crowd.calibrate's scene, no exit wall."""
+"""The HERMES corridor (1.8 m) with its rooms: jcrowd.rollouts.calibrate's scene, no exit wall."""
 HERMES_FPS = 16.0
 
 

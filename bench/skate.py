@@ -1,10 +1,10 @@
 """Foot skate of level-0 agents in the plaza run vs the captures' own (issue 7, as jcrowd eval).
 
 Runs ``examples/plaza.toml`` for ``--steps`` steps recording everything, re-synthesizes every
-agent that stayed at level 0 throughout (:func:`jcrowd.crowd.export.agent_motion`: the level-0 pose
-with the root where the run put it) and measures its foot skate (mean horizontal slide of a
-planted foot per frame, cm) with :func:`jcrowd.model.evaluate.foot_skate`; the same measure on the
-``cmu16`` captures (the default model's data, same 30 fps) is the reference.
+agent that stayed at level 0 throughout (:func:`jcrowd.model.resynthesis.agent_motion`: the
+level-0 pose with the root where the run put it) and measures its foot skate (mean horizontal
+slide of a planted foot per frame, cm) with :func:`jcrowd.model.evaluate.foot_skate`; the same
+measure on the ``cmu16`` captures (the default model's data, same 30 fps) is the reference.
 
 ``python bench/skate.py [--steps 240] [--json]``; appends a row to bench/RESULTS.md.
 """
@@ -20,9 +20,9 @@ from common import ROOT, data_root, machine, report
 
 from jcrowd import load_default_model
 from jcrowd.cli.run import simulate
-from jcrowd.crowd import agent_motion, prepare
+from jcrowd.crowd import prepare
 from jcrowd.io import load_dataset
-from jcrowd.model import foot_skate
+from jcrowd.model import agent_motion, foot_skate
 from jcrowd.scenario import load_scenario
 
 

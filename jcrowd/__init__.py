@@ -5,19 +5,11 @@ The public API is re-exported here once; each name is defined in the module that
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
-
 from jcrowd.errors import BVHError as BVHError
 from jcrowd.errors import DataError as DataError
 from jcrowd.errors import JcrowdError as JcrowdError
 from jcrowd.errors import MotionError as MotionError
 from jcrowd.errors import SkeletonError as SkeletonError
-
-try:
-    __version__ = version("jcrowd")
-except PackageNotFoundError:  # running from a source tree that was not installed
-    __version__ = "0.0.0+unknown"
-
 from jcrowd.io.bvh import load_bvh as load_bvh
 from jcrowd.io.bvh import read_bvh as read_bvh
 from jcrowd.io.bvh_write import write_bvh as write_bvh
@@ -31,3 +23,4 @@ from jcrowd.motion.gait import gait_cycles as gait_cycles
 from jcrowd.motion.skeleton import Skeleton as Skeleton
 from jcrowd.motion.skeleton import forward_kinematics as forward_kinematics
 from jcrowd.motion.walker import procedural_walk as procedural_walk
+from jcrowd.version import __version__ as __version__

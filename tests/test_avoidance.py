@@ -1,4 +1,4 @@
-"""The collision-free speed model (jcrowd.crowd.avoidance) against a NumPy transcription.
+"""The collision-free speed model (jcrowd.pedestrians.avoidance) against a NumPy transcription.
 
 The oracle below is the model's four equations (Tordeux, Chraibi & Seyfried 2016, Eqs. 1–4;
 walls as the module docstring reads them) written as plain float64 loops over every other agent
@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jcrowd.crowd import (
+from jcrowd.pedestrians import (
     AvoidanceParams,
     Motion,
     avoid,
@@ -285,7 +285,7 @@ def test_grid_kernel_equals_avoid_with_every_slot(clump, spread):
     order. A clump of ``clump`` agents in 2 × 2 m gives them ``clump − 1`` or more candidates
     (14: the middle tier only; 40: both tiers), ``spread`` agents over 60 × 60 m have few;
     with 200 in the clump more move on than the largest bucket, max(64, N/8), holds."""
-    from jcrowd.crowd import CANDIDATE_TIERS, avoid_in_grid, compact_candidates
+    from jcrowd.pedestrians import CANDIDATE_TIERS, avoid_in_grid, compact_candidates
 
     rng = np.random.default_rng(clump + spread)
     pos = np.concatenate(
@@ -334,7 +334,7 @@ TA, AA, DA, TAU, KEEP, WIDTH, WALKING = 1.0, 8.0, 0.1, 0.3, 0.05, 0.1, 0.3
 
 
 def _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt):
-    """The anticipating velocities as jcrowd.crowd.reaction's docstring reads Xu, Chraibi &
+    """The anticipating velocities as jcrowd.pedestrians.reaction's docstring reads Xu, Chraibi &
     Seyfried (2021), float64 loops: the closest approach found by sampling the horizon finely
     (not the closed form), the side and weights written out per pair, then the reaction time,
     the walls and the speed of Eqs. (2)–(3)."""
@@ -544,7 +544,7 @@ def test_anticipating_grid_kernel_and_block_equal_avoid():
     """avoid_in_grid with motion (velocities read in cell order) equals avoid with motion over
     every candidate; one interleaved block against the whole crowd equals the whole's rows.
     Tolerance 2e-6 m/s: the same float32 terms summed in another order."""
-    from jcrowd.crowd import avoid_in_grid
+    from jcrowd.pedestrians import avoid_in_grid
 
     rng = np.random.default_rng(5)
     pos = np.concatenate([rng.uniform(-1, 1, (40, 2)), rng.uniform(-20, 20, (120, 2))])

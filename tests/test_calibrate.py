@@ -13,20 +13,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jcrowd.crowd.avoidance import AvoidanceParams
-from jcrowd.crowd.calibrate import (
-    COARSE_GRID,
-    calibrate,
-    corridor_scene,
-    make_windows,
-    merge_windows,
-    person_residuals,
-    window_residuals,
-)
-from jcrowd.crowd.dynamics import Pedestrians, build_world, pedestrian_step
 from jcrowd.crowd.state import StepConfig
 from jcrowd.errors import DataError, JcrowdError, ScenarioError
 from jcrowd.io.trajectories import load_hermes_run, load_hermes_runs
+from jcrowd.pedestrians.params import AvoidanceParams
+from jcrowd.pedestrians.step import Pedestrians, pedestrian_step
+from jcrowd.pedestrians.world import build_world
+from jcrowd.rollouts.calibrate import COARSE_GRID, calibrate, person_residuals, window_residuals
+from jcrowd.rollouts.windows import corridor_scene, make_windows, merge_windows
 from jcrowd.scenario.parse import parse_scenario
 
 FPS = 30.0  # synthetic runs are recorded at the step's rate: a window is whole frames and steps
@@ -361,7 +355,7 @@ def test_cli_fits_one_run_and_writes_a_file_a_scenario_takes(
 def test_the_commands_default_fit_is_the_modules() -> None:
     """The parser keeps its own copy (it must not import jax): the two cannot drift."""
     from jcrowd.cli import _build_parser
-    from jcrowd.crowd.calibrate import DEFAULT_NAMES
+    from jcrowd.rollouts.calibrate import DEFAULT_NAMES
 
     parser, _ = _build_parser()
     args = parser.parse_args(["calibrate", "run.txt"])

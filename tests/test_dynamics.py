@@ -1,4 +1,4 @@
-"""The pedestrian step (jcrowd.crowd.dynamics): safety on a bottleneck run, exits, passing,
+"""The pedestrian step (jcrowd.pedestrians.step): safety on a bottleneck run, exits, passing,
 overflow, walls from geometry, and transformations (jit == eager)."""
 
 from __future__ import annotations
@@ -10,8 +10,14 @@ import pytest
 import shapely
 from on_devices import run_on_devices
 
-from jcrowd.crowd import AvoidanceParams, Pedestrians, build_world, pedestrian_step, wall_segments
 from jcrowd.errors import JcrowdError
+from jcrowd.pedestrians import (
+    AvoidanceParams,
+    Pedestrians,
+    build_world,
+    pedestrian_step,
+    wall_segments,
+)
 
 
 def _bottleneck(width: float):
@@ -129,7 +135,7 @@ def test_walls_are_the_walkable_boundary_and_bad_worlds_are_errors():
 SPLIT_SCRIPT = """
 import json
 import numpy as np, jax, jax.numpy as jnp, shapely
-from jcrowd.crowd import AvoidanceParams, Pedestrians, build_world, split_pedestrian_step
+from jcrowd.pedestrians import AvoidanceParams, Pedestrians, build_world, split_pedestrian_step
 room = shapely.box(0.0, 0.0, 6.0, 6.0)
 area = shapely.union(room, shapely.box(2.5, 6.0 - 1e-9, 3.5, 9.0))
 world = build_world(area, [shapely.box(2.5, 8.5, 3.5, 9.0)])

@@ -19,7 +19,6 @@ import pytest
 
 from jcrowd import load_default_model
 from jcrowd.crowd import prepare
-from jcrowd.crowd.export import _pose_vectors
 from jcrowd.crowd.following import (
     FOLLOW_MAX_RATE,
     SHUFFLE_BELOW,
@@ -29,6 +28,7 @@ from jcrowd.crowd.following import (
     follow_phase,
     stands_at,
 )
+from jcrowd.model.resynthesis import _pose_vectors
 from jcrowd.motion.clip import joint_positions
 from jcrowd.motion.rotation import quat_from_expmap, quat_mul, quat_normalize
 from jcrowd.scenario import parse_scenario

@@ -1,4 +1,4 @@
-"""Differentiable rollouts (jcrowd.crowd.rollout): gradients against central differences for
+"""Differentiable rollouts (jcrowd.rollouts.rollout): gradients against central differences for
 every parameter kind, checkpointed against plain, jit against eager and against a loop of the
 step, the surrogates' properties, the door helper, and bad input.
 
@@ -9,7 +9,7 @@ last still in the room, and nobody has reached the target at the corridor's end 
 agent leaves the scene (an arrival is a switch that central differences could straddle). The
 flow stays below the door's capacity: with eight agents pressing into this door the pathwise
 derivative grew about 2× every 5 steps and central differences no longer converged as h
-shrank (jcrowd.crowd.rollout, "Limits").
+shrank (jcrowd.rollouts.rollout, "Limits").
 
 Compiling the gradient of 90 steps of the pedestrian step takes about a minute on a 2-core
 CPU, so the gradient tests share one compiled function and are marked slow.
@@ -28,20 +28,18 @@ import numpy as np
 import pytest
 import shapely
 
-from jcrowd.crowd import AvoidanceParams, Pedestrians, build_world, pedestrian_step
-from jcrowd.crowd.rollout import (
+from jcrowd.errors import JcrowdError
+from jcrowd.pedestrians import AvoidanceParams, Pedestrians, build_world, pedestrian_step
+from jcrowd.rollouts.doors import door_walls, every_wall, find_door
+from jcrowd.rollouts.rollout import (
     RolloutParams,
     RolloutSetup,
     Trajectory,
-    door_walls,
-    every_wall,
-    find_door,
     initial_params,
     mean_travel_time,
     rollout,
     soft_exit_count,
 )
-from jcrowd.errors import JcrowdError
 
 STEPS = 90
 DT = 1.0 / 30.0
@@ -160,7 +158,7 @@ def _check(analytic: float, numeric: float, what: str) -> None:
     # The issue's bound: relative error ≤ 1e-2. Central differences at h = 1e-6 (relative) in
     # float64 carry truncation ~h² and rounding ~1e-16/h ≈ 1e-10, far below it; what could
     # exceed it is a step straddling a switch of the hard structure (module docstring of
-    # jcrowd.crowd.rollout), which these fixed directions do not.
+    # jcrowd.rollouts.rollout), which these fixed directions do not.
     assert abs(numeric) > 1e-6, f"{what}: the central difference is {numeric}, nothing to check"
     assert abs(analytic - numeric) <= 1e-2 * abs(numeric), (what, analytic, numeric)
 

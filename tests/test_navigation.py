@@ -1,4 +1,4 @@
-"""Navigation fields (jcrowd.crowd.navigation) against exact shortest paths.
+"""Navigation fields (jcrowd.pedestrians.navigation) against exact shortest paths.
 
 Oracle: the exact geodesic distance around polygonal obstacles is the shortest path in the
 visibility graph of the target and the obstacles' corners (a path bends only at corners); it is
@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 import shapely
 
-from jcrowd.crowd import (
+from jcrowd.errors import JcrowdError
+from jcrowd.pedestrians import (
     UNREACHABLE,
     Navigation,
     desired_directions,
@@ -25,7 +26,6 @@ from jcrowd.crowd import (
     field_values,
     rasterize,
 )
-from jcrowd.errors import JcrowdError
 
 
 def _geodesic(points, target, obstacles, room):

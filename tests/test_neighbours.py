@@ -1,4 +1,4 @@
-"""The neighbour grid (jcrowd.crowd.neighbours) against a brute-force all-pairs oracle."""
+"""The neighbour grid (jcrowd.pedestrians.neighbours) against a brute-force all-pairs oracle."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jcrowd.crowd import candidates, cell_list, grid_spec
-from jcrowd.crowd.neighbours import exclusive_prefix_sum
 from jcrowd.errors import JcrowdError
+from jcrowd.pedestrians import candidates, cell_list, grid_spec
+from jcrowd.pedestrians.neighbours import exclusive_prefix_sum
 
 
 def _crowd(n: int, seed: int, lo=(-5.0, -3.0), hi=(5.0, 3.0), dead=0.2):
@@ -136,7 +136,7 @@ def test_compact_candidates_are_the_3x3_cells_in_order(n, k):
     increasing; within a cell ids increasing, from the brute-force cell lists): the first k
     of that list, the agent itself then blanked, are the compacted ids, and its length less
     the agent itself is the count."""
-    from jcrowd.crowd import compact_candidates
+    from jcrowd.pedestrians import compact_candidates
 
     pos, alive = _crowd(n, 4)
     spec = grid_spec((-5.0, -3.0), (5.0, 3.0), 1.0)
@@ -162,7 +162,7 @@ def test_compact_candidates_are_the_3x3_cells_in_order(n, k):
 
 
 def test_compact_candidates_for_a_block_use_its_rows():
-    from jcrowd.crowd import compact_candidates
+    from jcrowd.pedestrians import compact_candidates
 
     pos, alive = _crowd(120, 6)
     spec = grid_spec((-5.0, -3.0), (5.0, 3.0), 1.0)

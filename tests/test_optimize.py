@@ -1,4 +1,4 @@
-"""Layout optimisation (jcrowd.crowd.layout_opt, jcrowd optimize): key paths, the walls as a
+"""Layout optimisation (jcrowd.rollouts.layout_opt, jcrowd optimize): key paths, the walls as a
 function of θ against shapely's outlines, the optimiser on closed-form quadratics, the gradient
 against central differences of the forward objective, jit against eager, the CLI's written
 scenario, and bad input.
@@ -6,7 +6,7 @@ scenario, and bad input.
 The rollout scene (``SMALL``): a 6 m × 5 m room whose south wall has two doors, 1.2 m and 0.8 m
 wide, on either side of a 2 m wall piece (the varied numbers: its x and the east piece's x)
 and a round pillar in the room; 8 people walk out for 3 s (60 steps at 20 /s). Few enough
-that nobody queues: the exact gradient is usable there (jcrowd.crowd.rollout, "Limits").
+that nobody queues: the exact gradient is usable there (jcrowd.rollouts.rollout, "Limits").
 Compiling a rollout's gradient takes about 45 s on a 2-core CPU, so the tests that need one
 are marked slow and share one scene.
 """
@@ -26,20 +26,18 @@ from hypothesis import strategies as st
 
 from jcrowd.cli import main
 from jcrowd.cli.optimize import set_toml_values
-from jcrowd.crowd.layout_opt import (
+from jcrowd.errors import JcrowdError
+from jcrowd.rollouts.layout_opt import (
     _forward,
     forward_value,
     layout_objective,
     layout_problem,
     layout_setup,
     obstacle_walls,
-    parse_key_path,
-    projected_gradient,
     value_and_gradient,
-    varied_parameter,
-    with_values,
 )
-from jcrowd.errors import JcrowdError
+from jcrowd.rollouts.search import projected_gradient
+from jcrowd.scenario.keys import parse_key_path, varied_parameter, with_values
 from jcrowd.scenario.layout import region_shape
 from jcrowd.scenario.parse import parse_scenario
 

@@ -1,4 +1,4 @@
-"""A layout in the animated crowd step (jcrowd.crowd.scene): navigation fields and walls.
+"""A layout in the animated crowd step (jcrowd.pedestrians.scene): navigation fields and walls.
 
 Oracles: shapely geometry (is an agent inside a wall, does the straight line cross it), the
 field ids enumerated by hand, and the behaviour a wall with a door must cause — everyone
@@ -8,15 +8,16 @@ reaches the far side through the door and nobody is ever inside the wall.
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 import shapely
 
 from jcrowd import load_default_model
 from jcrowd.crowd import prepare
-from jcrowd.crowd.navigation import field_values
-from jcrowd.crowd.scene import build_scene, scene_bytes
 from jcrowd.errors import ScenarioError
+from jcrowd.pedestrians.navigation import field_values
+from jcrowd.pedestrians.scene import build_scene, scene_bytes
 from jcrowd.scenario import free_space, parse_scenario, spawn
 
 BASE = """
@@ -97,7 +98,7 @@ path = { waypoints = [[-3, 4], [5, 4], [7, -4]] }
 
 
 def test_fields_too_large_are_refused_before_they_are_built(monkeypatch):
-    import jcrowd.crowd.scene as scene_module
+    import jcrowd.pedestrians.scene as scene_module
 
     monkeypatch.setattr(scene_module, "MAX_FIELD_BYTES", 1000)
     s = _scenario(BASE.format(avoid="true") + DOOR + CROSSING)
@@ -121,7 +122,7 @@ path = { waypoints = [[-0.6, 0]] }
     )
     s = _scenario(text)
     sim, _ = prepare(s, load_default_model())
-    nav = sim.scene.nav
+    nav = sim.world.nav
     near = float(field_values(nav, np.array([0]), np.array([-1.0]), np.array([0.0]))[0])
     far = float(field_values(nav, np.array([0]), np.array([0.8]), np.array([0.0]))[0])
     assert near <= 0.0
@@ -161,17 +162,17 @@ def test_agents_walk_through_the_door_and_never_into_the_wall():
 
 def test_steering_with_a_scene_is_the_same_under_jit():
     """jit == eager for the dynamics stage with fields and walls (the stage the scene adds)."""
-    from jcrowd.crowd.steering import current_field, steer, waypoint_xz
+    from jcrowd.crowd.steering import walk
 
     s = _scenario(BASE.format(avoid="true") + DOOR + CROSSING)
     sim, state = prepare(s, load_default_model())
-    grid, scene = sim.config.grid, sim.scene
-    tx, tz = waypoint_xz(state.waypoints, state.waypoint)
-    args = (state.x, state.z, tx, tz, state.speed, state.radius, state.alive)
+    near = jnp.ones(state.num_agents, bool)
+    dt = jnp.float32(sim.dt)
 
-    def run(*a):
-        return steer(grid, *a, scene=scene, field=current_field(state))
+    def run(state):
+        return walk(sim.config, sim.world, state, near, dt)
 
+    args = (state,)
     eager = run(*args)
     jitted = jax.jit(run)(*args)
     for e, j in zip(eager, jitted, strict=True):

@@ -1,6 +1,7 @@
-"""Simulation level of detail (``[dynamics] far_every``, jcrowd.crowd.steering.due_rows/steer).
+"""Simulation level of detail (``[dynamics] far_every``: jcrowd.crowd.steering.due_rows and the
+pedestrian step's ``due`` rows).
 
-Oracles: a loop over rows for who is due; the full ``steer`` (every agent every step) for the
+Oracles: a loop over rows for who is due; the full step (every agent every step) for the
 velocities of the agents that are due — they see the same neighbours — and the previous
 velocities for the others; the stepped crowd's own contract (no recompiles, discs kept apart).
 """
@@ -14,9 +15,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jcrowd.crowd import grid_spec
-from jcrowd.crowd.steering import due_rows, steer
+from jcrowd.crowd.steering import due_rows
 from jcrowd.errors import JcrowdError
+from jcrowd.pedestrians import AvoidanceParams, Pedestrians, grid_spec, open_world, pedestrian_step
 from jcrowd.scenario import parse_scenario
 
 
@@ -64,17 +65,34 @@ def _crowd(n=120, seed=0):
     return grid, args, jnp.asarray(alive), (jnp.asarray(prev[:, 0]), jnp.asarray(prev[:, 1]))
 
 
+def _velocities(grid, x, z, tx, tz, speed, radius, alive, previous, due=None):
+    """The pedestrian step's velocities ``(vx, vz)`` of agents walking straight at ``(tx, tz)``
+    in an open world, relaxing from ``previous`` (the plain model)."""
+    peds = Pedestrians(
+        jnp.stack([x, z], axis=1),
+        jnp.zeros(x.shape[0], jnp.int32),
+        speed,
+        radius,
+        alive,
+        velocity=jnp.stack(previous, axis=1),
+        goal=jnp.stack([tx, tz], axis=1),
+        anticipate=False,
+    )
+    _, info = pedestrian_step(AvoidanceParams(), open_world(grid), peds, 1 / 30, due=due)
+    return info.velocity[:, 0], info.velocity[:, 1]
+
+
 def test_due_agents_move_as_with_everyone_due_and_the_others_keep_their_velocity():
-    """Oracle: steer with every agent due, from the same previous velocities (the plain
+    """Oracle: the step with every agent due, from the same previous velocities (the plain
     model relaxes from them over its reaction time). Tolerance 1e-6 m/s: the same sums on a subset
     (the kernel's order of summation is per agent, unchanged)."""
     grid, args, alive, prev = _crowd()
     n = args[0].shape[0]
-    full = jax.jit(lambda *a: steer(grid, *a[:7], previous=a[7]))
-    want_x, want_z, _ = full(*args, alive, prev)
+    full = jax.jit(lambda *a: _velocities(grid, *a))
+    want_x, want_z = full(*args, alive, prev)
     due = jnp.asarray(np.r_[np.arange(3, n, 4), [n] * 5], jnp.int32)
-    part = jax.jit(lambda *a: steer(grid, *a[:7], due=a[7], previous=a[8]))
-    got_x, got_z, _ = part(*args, alive, due, prev)
+    part = jax.jit(lambda *a: _velocities(grid, *a[:8], due=a[8]))
+    got_x, got_z = part(*args, alive, prev, due)
     is_due = np.zeros(n, bool)
     is_due[3::4] = True
     live = np.asarray(alive)
@@ -91,9 +109,9 @@ def test_everyone_due_equals_no_selection():
     """Transformation: a selection holding every row (in order) is the plain step, bit for bit."""
     grid, args, alive, prev = _crowd(seed=1)
     n = args[0].shape[0]
-    a = steer(grid, *args, alive, previous=prev)
-    b = steer(grid, *args, alive, due=jnp.arange(n, dtype=jnp.int32), previous=prev)
-    for u, v in zip(a[:2], b[:2], strict=True):
+    a = _velocities(grid, *args, alive, prev)
+    b = _velocities(grid, *args, alive, prev, due=jnp.arange(n, dtype=jnp.int32))
+    for u, v in zip(a, b, strict=True):
         np.testing.assert_array_equal(np.asarray(u), np.asarray(v))
 
 

@@ -137,7 +137,7 @@ def test_split_over_two_devices_equals_one_device():
     """Neighbours on the other device are seen through the all-gather (with anticipation,
     their velocities too): same crowd to 1e-4 m after 40 steps (float32; XLA may order a
     block's sums differently, and 40 steps of avoidance let a 1e-6 difference grow). A pillar
-    between the groups puts the scene's navigation fields and walls (jcrowd.crowd.scene) under
+    between the groups puts the scene's navigation fields and walls (jcrowd.pedestrians.scene) under
     the split too. The anticipation model only: it gathers positions and velocities, the
     collision-free speed model positions alone; both models' gathers are compared split and
     whole in tests/test_dynamics.py (each crowd-step run here is a ~45 s compile)."""
@@ -186,8 +186,8 @@ def test_a_crowded_waypoint_counts_as_passed_only_past_it_and_within_pass_reach(
     spots = [(0, inside), (0, between), (0, -between), (0, beyond), (between, 0.1), (0, -inside)]
     want = [True, avoid, False, False, avoid, True]
     state = _placed(state, spots)
-    new, _ = schedule(sim.crowd, sim.config, state, jnp.ones(6, bool), sim.scene)
-    assert sim.scene is None  # no obstacles: the reach rule, not a navigation target
+    new, _ = schedule(sim.crowd, sim.config, state, jnp.ones(6, bool), sim.world)
+    assert sim.world is None  # no obstacles: the reach rule, not a navigation target
     np.testing.assert_array_equal(np.asarray(new.waypoint) == 1, want)
 
 

@@ -14,8 +14,8 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from jcrowd import __version__
 from jcrowd.errors import JcrowdError
+from jcrowd.version import __version__
 
 __all__ = ["main"]
 
@@ -57,14 +57,6 @@ def _build_parser() -> tuple[argparse.ArgumentParser, dict[str, Handler]]:
         p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
         handlers[p.prog.split()[-1]] = module.run
     return parser, handlers
-
-
-def emit(result: dict[str, Any], as_json: bool, render: Callable[[dict[str, Any]], None]) -> None:
-    """Print ``result`` as one JSON object, or hand it to a human-readable renderer."""
-    if as_json:
-        sys.stdout.write(json.dumps(result, indent=2, allow_nan=False) + "\n")
-    else:
-        render(result)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

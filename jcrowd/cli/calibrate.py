@@ -3,19 +3,19 @@
 ``DATA`` are HERMES corridor runs (``uo-<entrance>-<corridor>-<exit>.txt``, centimetres, 16 fps,
 as in the shared data's ``hermes_uo``) or folders holding them; each run's steady-state frames
 come from ``steady_state.csv`` beside it (the whole run where it is not listed). The fit is
-:func:`jcrowd.crowd.calibrate.calibrate`: Levenberg–Marquardt through short differentiable
+:func:`jcrowd.rollouts.calibrate.calibrate`: Levenberg–Marquardt through short differentiable
 rollouts from the measured states (that module's docstring says what is compared and why).
 
 ``--fit`` names the parameters (default ``time_gap,radius``, as
-:data:`jcrowd.crowd.calibrate.DEFAULT_NAMES`, whose module says why; any field of
-:class:`~jcrowd.crowd.avoidance.AvoidanceParams`, ``radius`` or ``desired_speed``),
+:data:`jcrowd.rollouts.calibrate.DEFAULT_NAMES`, whose module says why; any field of
+:class:`~jcrowd.pedestrians.params.AvoidanceParams`, ``radius`` or ``desired_speed``),
 ``--start NAME=VALUE`` moves a start value from the model's default. The fitted values are
 written (atomically) to ``--out`` as TOML: ``[avoidance]`` (what a scenario's ``[dynamics]
 params = "params.toml"`` sets), ``[body]`` (a fitted ``radius``: that scenario's ``[dynamics]
 radius`` unless it names its own), ``[population]`` (the fitted free speed: set your groups'
 ``speed`` to it to walk like the measured people) and ``[calibration]`` (the runs, the start,
 the residuals). Levenberg–Marquardt starts at the best point of a coarse grid
-(:data:`jcrowd.crowd.calibrate.COARSE_GRID`) and the start (``--no-search``: at the start).
+(:data:`jcrowd.rollouts.calibrate.COARSE_GRID`) and the start (``--no-search``: at the start).
 ``--json`` prints one object: the start, the point the fit started from
 (``searched_from``) and the fitted values, the residual RMS at each, the steps, the Jacobian's
 singular values and the seconds taken.
@@ -41,7 +41,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--out", default="params.toml", help="parameters file to write (TOML)")
     p.add_argument(
         "--fit",
-        default="time_gap,radius",  # jcrowd.crowd.calibrate.DEFAULT_NAMES (the parser loads no jax)
+        # jcrowd.rollouts.calibrate.DEFAULT_NAMES (the parser loads no jax)
+        default="time_gap,radius",
         help="comma-separated parameters to fit",
     )
     p.add_argument(
@@ -69,7 +70,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from jcrowd.cli import emit
+    from jcrowd.cli.output import emit
 
     result = _calibrate(args)
     emit(result, args.json, _print)
@@ -77,10 +78,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _start_values(names: list[str], given: list[str]) -> dict[str, float]:
-    from jcrowd.crowd.avoidance import AvoidanceParams
-    from jcrowd.crowd.calibrate import RADIUS_NAME, SPEED_NAME
-    from jcrowd.crowd.calibrate_windows import RADIUS
     from jcrowd.errors import JcrowdError
+    from jcrowd.pedestrians.params import AvoidanceParams
+    from jcrowd.rollouts.calibrate import RADIUS_NAME, SPEED_NAME
+    from jcrowd.rollouts.windows import RADIUS
 
     defaults = AvoidanceParams()
     start: dict[str, float] = {}
@@ -109,10 +110,11 @@ def _calibrate(args: argparse.Namespace) -> dict[str, Any]:
     from rich.console import Console
     from rich.progress import Progress
 
-    from jcrowd.crowd.calibrate import COARSE_GRID, calibrate, make_windows, merge_windows
     from jcrowd.errors import JcrowdError
     from jcrowd.io.atomic import write_atomic
     from jcrowd.io.trajectories import load_hermes_runs
+    from jcrowd.rollouts.calibrate import COARSE_GRID, calibrate
+    from jcrowd.rollouts.windows import make_windows, merge_windows
 
     names = [n.strip() for n in args.fit.split(",") if n.strip()]
     start = _start_values(names, args.start)
@@ -171,7 +173,7 @@ def _calibrate(args: argparse.Namespace) -> dict[str, Any]:
 
 def params_toml(result: dict[str, Any]) -> str:
     """The parameters file: ``[avoidance]``, ``[body]``, ``[population]`` and ``[calibration]``."""
-    from jcrowd.crowd.calibrate import EXTRA_NAMES, RADIUS_NAME, SPEED_NAME
+    from jcrowd.rollouts.calibrate import EXTRA_NAMES, RADIUS_NAME, SPEED_NAME
 
     fitted = result["fitted"]
     lines = ["# jcrowd calibrate: fitted to measured trajectories", "", "[avoidance]"]

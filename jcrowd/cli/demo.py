@@ -31,7 +31,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from jcrowd.cli import emit
+    from jcrowd.cli.output import emit
     from jcrowd.cli.render import parse_size, render_scenario
     from jcrowd.errors import JcrowdError
     from jcrowd.io.resources import demo_scenario_path, load_default_model

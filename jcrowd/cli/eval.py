@@ -39,7 +39,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from jcrowd.cli import emit
+    from jcrowd.cli.output import emit
     from jcrowd.errors import DataError
     from jcrowd.io.dataset import load_dataset
     from jcrowd.io.model_file import load_motion_model

@@ -1,7 +1,7 @@
 """``jcrowd export RUN.npz``: agents of a recorded run as BVH files, or the whole crowd as one glTF.
 
 The run must be recorded with ``jcrowd run --record all``. Each chosen agent is re-synthesized
-at full detail from its recorded clips and phases (:func:`jcrowd.crowd.export.agent_motion`).
+at full detail from its recorded clips and phases (:func:`jcrowd.model.resynthesis.agent_motion`).
 
 - ``--format bvh`` (default): ``--agent ID [ID ...] --out-dir DIR`` writes ``DIR/agent_ID.bvh``
   (metres, the run's frame rate, every joint of the model's skeleton), which Blender and
@@ -61,7 +61,7 @@ def _frames(text: str | None, total: int) -> slice:
 def run(args: argparse.Namespace) -> dict[str, Any]:
     import numpy as np
 
-    from jcrowd.cli import emit
+    from jcrowd.cli.output import emit
     from jcrowd.errors import JcrowdError
     from jcrowd.io.model_file import load_motion_model
 
@@ -85,8 +85,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _bvh(args: argparse.Namespace, rec: dict, model: Any) -> dict[str, Any]:
-    from jcrowd.crowd.export import agent_motion
     from jcrowd.io.bvh_write import write_bvh
+    from jcrowd.model.resynthesis import agent_motion
 
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -107,11 +107,11 @@ def _glb(args: argparse.Namespace, rec: dict, model: Any) -> dict[str, Any]:
     from rich.console import Console
     from rich.progress import Progress
 
-    from jcrowd.crowd.export import agent_motion
     from jcrowd.errors import JcrowdError
     from jcrowd.io.body_file import load_body
     from jcrowd.io.gltf_write import CrowdAgent, write_crowd_glb
     from jcrowd.io.resources import body_path
+    from jcrowd.model.resynthesis import agent_motion
     from jcrowd.motion.body import bind_body
     from jcrowd.motion.clip import rest_forward, slice_frames
     from jcrowd.render.bodies import tint_palette

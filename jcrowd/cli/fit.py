@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from rich.console import Console
     from rich.progress import Progress
 
-    from jcrowd.cli import emit
+    from jcrowd.cli.output import emit
     from jcrowd.io.dataset import load_dataset
     from jcrowd.io.model_file import save_motion_model
     from jcrowd.model.evaluate import leave_one_clip_out
@@ -107,7 +107,7 @@ def stored_fit(result: dict[str, Any], clips: Any, data_dir: str) -> dict[str, A
     """The fit's report as the model file keeps it: no path of the machine that fitted it (the
     dataset by its folder's name, the output by its file name) and every clip's SHA-256 by its
     path inside the dataset, so a model names the data it came from and a rebuild can be
-    checked against it (issue 21)."""
+    checked against it."""
     import hashlib
     from pathlib import Path
 

@@ -190,7 +190,7 @@ def _render(result: dict[str, Any]) -> None:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from jcrowd.cli import emit
+    from jcrowd.cli.output import emit
     from jcrowd.io.resources import sample_bvh_path
 
     path = args.file

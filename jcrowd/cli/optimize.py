@@ -4,7 +4,7 @@ Each ``--vary`` names a number of an ``[[obstacles]]`` table by its key path, wi
 bounds: ``obstacles[1].center[0]`` (±1 m round its value; sizes and radii ×0.5 … ×1.5) or
 ``obstacles[1].center[0]=4.6:5.5``. The objective (``--objective``): ``travel_time`` (mean time
 until each agent is within 1 m of its goal, s), ``evacuation`` (soft time until the last is,
-s) or ``flow`` (agents out per second by the end); :mod:`jcrowd.crowd.layout_opt` defines them
+s) or ``flow`` (agents out per second by the end); :mod:`jcrowd.rollouts.layout_opt` defines them
 and the optimiser: projected gradient descent with a line search on the forward objective, the
 navigation field rebuilt at each iterate and held fixed inside the gradient.
 
@@ -75,7 +75,7 @@ def _spec(text: str) -> tuple[str, tuple[float, float] | None]:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from jcrowd.cli import emit
+    from jcrowd.cli.output import emit
 
     result = _optimize(args)
     emit(result, args.json, _print)
@@ -86,14 +86,11 @@ def _optimize(args: argparse.Namespace) -> dict[str, Any]:
     import numpy as np
     from rich.console import Console
 
-    from jcrowd.crowd.layout_opt import (
-        layout_problem,
-        projected_gradient,
-        value_and_gradient,
-        varied_parameter,
-    )
     from jcrowd.errors import JcrowdError
     from jcrowd.io.atomic import write_atomic
+    from jcrowd.rollouts.layout_opt import layout_problem, value_and_gradient
+    from jcrowd.rollouts.search import projected_gradient
+    from jcrowd.scenario.keys import varied_parameter
     from jcrowd.scenario.parse import load_scenario
 
     path = Path(args.scenario)
@@ -155,8 +152,8 @@ def set_toml_values(text: str, values: dict[str, float], source: str = "<text>")
         JcrowdError: a key that is not in a ``[[table]]`` written with its header, or a
             result that does not parse back to the values asked for.
     """
-    from jcrowd.crowd.layout_opt import parse_key_path
     from jcrowd.errors import JcrowdError
+    from jcrowd.scenario.keys import parse_key_path
 
     expected = tomllib.loads(text)
     for key, value in values.items():

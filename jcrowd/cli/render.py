@@ -72,7 +72,7 @@ def fixed_camera(scenario: Any, eye: str | None, target: str | None) -> Any:
     from dataclasses import replace
 
     from jcrowd.errors import RenderError
-    from jcrowd.scenario.schema import CameraKey
+    from jcrowd.scenario.camera import CameraKey
 
     if eye is None and target is None:
         return scenario
@@ -128,7 +128,7 @@ class _Sink:
 
 def _view(scenario: Any, t: float) -> Any:
     from jcrowd.render import View
-    from jcrowd.scenario.schema import camera_at
+    from jcrowd.scenario.camera import camera_at
 
     cam = scenario.camera
     eye, target = camera_at(cam, t)
@@ -178,15 +178,42 @@ def _dot_sticks(xz: np.ndarray, heights: np.ndarray) -> np.ndarray:
     return np.stack([ground, head], axis=1)
 
 
-def scenario_obstacles(scenario: Any) -> np.ndarray:
-    """The scenario's obstacles, walls and the ground outside ``walkable`` as drawable prisms
-    (:func:`jcrowd.render.meshes.prism_mesh`); none without a layout."""
-    from jcrowd.render.meshes import prism_mesh
-    from jcrowd.scenario import blocked_space
+def _level_instances(
+    host: Any,
+    color_by: str,
+    group_colors: np.ndarray,
+    tints: Any,
+    heights: np.ndarray,
+    capsules: bool,
+) -> list[Any]:
+    """One :class:`~jcrowd.render.LevelInstances` per level from a frame's host
+    ``(slots, valid, points)``: each agent's colours and height."""
+    from jcrowd.render import LevelInstances
 
-    if scenario.layout.empty:
-        return np.zeros((0, 6), np.float32)
-    return prism_mesh(blocked_space(scenario.ground, scenario.layout))
+    n = len(heights)
+    levels = []
+    for lv, (slots, valid, pts) in enumerate(zip(*host, strict=True)):
+        cols = _colors(color_by, lv, slots, group_colors, tints)
+        if capsules:
+            cols = _for_capsules(cols)
+        levels.append(LevelInstances(pts, valid, cols, heights[np.minimum(slots, n - 1)]))
+    return levels
+
+
+def _dot_instances(
+    xz: np.ndarray,
+    dots: np.ndarray,
+    color_by: str,
+    group_colors: np.ndarray,
+    tints: Any,
+    heights: np.ndarray,
+    level: int,
+) -> Any:
+    """The agents drawn as dots (one stick each, ground to head), in their colours."""
+    from jcrowd.render import LevelInstances
+
+    colors = _colors(color_by, level, np.arange(len(heights)), group_colors, tints)
+    return LevelInstances(_dot_sticks(xz, heights), dots, _for_capsules(colors))
 
 
 def render_scenario(
@@ -201,80 +228,55 @@ def render_scenario(
 ) -> dict[str, Any]:
     """Step and draw ``scenario``; write the clip (and optionally one PNG still)."""
     import jax
-    from rich.console import Console
-    from rich.progress import Progress
 
+    from jcrowd.cli.runloop import RunLoop, scenario_obstacles
     from jcrowd.crowd.devices import in_agent_order, shard_state
     from jcrowd.crowd.simulate import prepare
     from jcrowd.crowd.synthesis import point_parents
-    from jcrowd.render import CrowdRenderer, LevelInstances, write_png
+    from jcrowd.render import CrowdRenderer, write_png
     from jcrowd.render.bodies import tint_palette
 
     sim, state = prepare(scenario, model)
     bodies = body_levels(model, sim.crowd.decoders) if style == "body" else None
-    state = shard_state(state)  # one block of agents per device (unchanged on one device)
-    fn = sim.compiled()
+    loop = RunLoop(sim, shard_state(state))  # one block of agents per device
     n_frames = sim.steps if frames is None else frames
-    parents = point_parents(model)
     group_colors = np.asarray(sim.spawn.color, np.float32)
     n = sim.num_agents
     heights = np.asarray(sim.spawn.height, np.float32)
     tints = tint_palette(n)
-    t0 = time.perf_counter()
-    warm = jax.tree.map(jax.numpy.copy, state)  # the step donates its input state
-    _, first = jax.block_until_ready(fn(warm, sim.view_at(0.0), sim.dt_array))
-    compile_s = time.perf_counter() - t0
     # Slots per level as the step returns them (split over K devices a level holds K shares of
     # its capacity, rounded up: jcrowd.crowd.devices.per_device_config).
-    caps = tuple(int(s.shape[0]) for s in first.slots)
-    step_ms, draw_ms = [], []
+    caps = tuple(int(s.shape[0]) for s in loop.first.slots)
+    draw_ms = []
     sink = _Sink(out, scenario.fps)
     ok = False
     middle = None
+
+    def before(state: Any, view: Any) -> np.ndarray:  # where the dots stand at the frame
+        return in_agent_order(state.position, state)
+
     try:
-        with (
-            CrowdRenderer(
-                [parents] * len(caps) + [DOT_PARENTS],
-                *size,
-                capacity=(*caps, n),
-                obstacles=scenario_obstacles(scenario),
-                bodies=None if bodies is None else [*bodies, None],
-                sky=bodies is not None,
-            ) as renderer,
-            Progress(console=Console(file=sys.stderr), transient=True) as bar,
-        ):
-            task = bar.add_task(f"rendering {n_frames} frames", total=n_frames)
-            for i in range(n_frames):
+        with CrowdRenderer(
+            [point_parents(model)] * len(caps) + [DOT_PARENTS],
+            *size,
+            capacity=(*caps, n),
+            obstacles=scenario_obstacles(scenario),
+            bodies=None if bodies is None else [*bodies, None],
+            sky=bodies is not None,
+        ) as renderer:
+            for i, xz, frame in loop.frames(n_frames, f"rendering {n_frames} frames", before):
                 t = time.perf_counter()
-                # The frame is the step's start; the state is donated. Per-agent arrays come back
-                # in agent order (agents are interleaved over several devices).
-                xz = in_agent_order(state.position, state)
-                state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt_array)
                 host = jax.device_get((frame.slots, frame.valid, frame.points))
-                dots = in_agent_order(frame.dots, state)
-                step_ms.append(1e3 * (time.perf_counter() - t))
-                t = time.perf_counter()
-                levels = []
-                for lv, (slots, valid, pts) in enumerate(zip(*host, strict=True)):
-                    cols = _colors(color_by, lv, slots, group_colors, tints)
-                    if bodies is None:
-                        cols = _for_capsules(cols)
-                    tall = heights[np.minimum(slots, n - 1)]
-                    levels.append(LevelInstances(pts, valid, cols, tall))
-                ids = np.arange(n)
-                levels.append(
-                    LevelInstances(
-                        _dot_sticks(xz, heights),
-                        dots,
-                        _for_capsules(_colors(color_by, len(caps), ids, group_colors, tints)),
-                    )
+                dots = in_agent_order(frame.dots, loop.state)
+                levels = _level_instances(
+                    host, color_by, group_colors, tints, heights, bodies is None
                 )
-                image = renderer.render(_view(scenario, i * sim.dt), levels)
+                dot = _dot_instances(xz, dots, color_by, group_colors, tints, heights, len(caps))
+                image = renderer.render(_view(scenario, i * sim.dt), [*levels, dot])
                 draw_ms.append(1e3 * (time.perf_counter() - t))
                 sink.add(image)
                 if i == n_frames // 2:
                     middle = image
-                bar.advance(task)
             renderer_name = renderer.renderer_name
         ok = True
     finally:
@@ -287,10 +289,26 @@ def render_scenario(
         "out": str(out),
         "size": list(size),
         "ms_per_frame_median": float(np.median(draw_ms)),
-        "ms_per_step_median": float(np.median(step_ms)),
-        "compile_s": compile_s,
+        "ms_per_step_median": 1e3 * float(np.median(loop.step_seconds)),
+        "compile_s": loop.compile_s,
         "renderer": renderer_name,
     }
+
+
+def _recording_bodies(path: str, rec: Any, nlev: int, model_path: str | None) -> Any:
+    """The bodies a recording is drawn with: bound to the model it names (or ``model_path``)."""
+    from jcrowd.errors import RenderError
+    from jcrowd.io.model_file import load_motion_model
+
+    name = model_path or (str(rec["model"]) if "model" in rec else "")
+    if not name:
+        raise RenderError(f"{path}: names no model to bind bodies to; pass --model")
+    model, _ = load_motion_model(name)
+    if len(model.levels) != nlev:
+        raise RenderError(
+            f"{path}: recorded {nlev} levels, the model {name} has {len(model.levels)}"
+        )
+    return body_levels(model)
 
 
 def render_recording(
@@ -305,7 +323,7 @@ def render_recording(
     """Draw the joints recorded by ``jcrowd run --record visible|all``: as bodies (bound to the
     model the recording names, or ``model_path``) or capsules."""
     from jcrowd.errors import RenderError
-    from jcrowd.render import CrowdRenderer, LevelInstances, View
+    from jcrowd.render import CrowdRenderer, View
     from jcrowd.render.bodies import tint_palette
 
     rec = np.load(path)
@@ -316,63 +334,43 @@ def render_recording(
             f"found only {sorted(rec.files)}"
         )
     parents = tuple(int(p) for p in rec["parents"])
-    steps = rec["points_0"].shape[0]
-    n_frames = steps if frames is None else min(frames, steps)
+    n_frames = rec["points_0"].shape[0] if frames is None else min(frames, rec["points_0"].shape[0])
     caps = [rec[f"points_{lv}"].shape[1] for lv in range(nlev)]
     w, h = size or (1280, 720)
-    bodies = None
-    if style == "body":
-        from jcrowd.io.model_file import load_motion_model
-
-        name = model_path or (str(rec["model"]) if "model" in rec else "")
-        if not name:
-            raise RenderError(f"{path}: names no model to bind bodies to; pass --model")
-        model, _ = load_motion_model(name)
-        if len(model.levels) != nlev:
-            raise RenderError(
-                f"{path}: recorded {nlev} levels, the model {name} has {len(model.levels)}"
-            )
-        bodies = body_levels(model)
+    bodies = _recording_bodies(path, rec, nlev, model_path) if style == "body" else None
     heights = np.asarray(rec["height"], np.float32)
     tints = tint_palette(len(heights))
     group_colors = np.asarray(rec["color"], np.float32)
     fov, near, far = (float(v) for v in rec["lens"])
+    dots = "dots" in rec  # a recording without detail culling has none
+    n = len(heights)
     draw_ms = []
     sink = _Sink(out, float(rec["fps"]))
     ok = False
     try:
-        dots = "dots" in rec  # recordings made before detail culling have none
-        n = len(rec["height"])
-        meshes = [parents] * nlev + ([DOT_PARENTS] if dots else [])
-        # Recordings of scenarios with a layout carry its prisms (jcrowd run).
-        obstacles = rec["obstacles"] if "obstacles" in rec else None
         with CrowdRenderer(
-            meshes,
+            [parents] * nlev + ([DOT_PARENTS] if dots else []),
             w,
             h,
             capacity=caps + ([n] if dots else []),
-            obstacles=obstacles,
+            obstacles=rec["obstacles"] if "obstacles" in rec else None,  # scenarios with a layout
             bodies=None if bodies is None else [*bodies] + ([None] if dots else []),
             sky=bodies is not None,
         ) as renderer:
             for i in range(n_frames):
                 t = time.perf_counter()
-                levels = []
-                for lv in range(nlev):
-                    slots = rec[f"slots_{lv}"][i]
-                    cols = _colors(color_by, lv, slots, group_colors, tints)
-                    if bodies is None:
-                        cols = _for_capsules(cols)
-                    tall = heights[np.minimum(slots, len(heights) - 1)]
-                    levels.append(
-                        LevelInstances(rec[f"points_{lv}"][i], rec[f"valid_{lv}"][i], cols, tall)
-                    )
+                host = tuple(
+                    [rec[f"{k}_{lv}"][i] for lv in range(nlev)]
+                    for k in ("slots", "valid", "points")
+                )
+                levels = _level_instances(
+                    host, color_by, group_colors, tints, heights, bodies is None
+                )
                 if dots:
-                    sticks = _dot_sticks(rec["position"][i], rec["height"])
-                    colors = _for_capsules(
-                        _colors(color_by, nlev, np.arange(n), group_colors, tints)
+                    xz, shown = rec["position"][i], rec["dots"][i]
+                    levels.append(
+                        _dot_instances(xz, shown, color_by, group_colors, tints, heights, nlev)
                     )
-                    levels.append(LevelInstances(sticks, rec["dots"][i], colors))
                 view = View(
                     tuple(rec["eye"][i]), tuple(rec["target"][i]), fov_deg=fov, near=near, far=far
                 )
@@ -392,8 +390,8 @@ def render_recording(
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from jcrowd.cli import emit
-    from jcrowd.cli.run import load_model
+    from jcrowd.cli.output import emit
+    from jcrowd.cli.runloop import load_model
     from jcrowd.scenario.parse import load_scenario
 
     if Path(args.source).suffix.lower() == ".npz":

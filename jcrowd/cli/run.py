@@ -44,7 +44,6 @@ import argparse
 import io
 import os
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -92,16 +91,6 @@ def init_distributed(coordinator: str, processes: int, process_id: int) -> None:
     jax.distributed.initialize(coordinator, processes, process_id)
 
 
-def load_model(scenario: Any, override: str | None) -> tuple[Any, str]:
-    """The model a run uses: ``--model``, else the scenario's, else the shipped default."""
-    from jcrowd.io.model_file import load_motion_model
-    from jcrowd.io.resources import default_model_path
-
-    path = override or scenario.model or str(default_model_path())
-    model, _ = load_motion_model(path)
-    return model, str(path)
-
-
 def use_cpu_devices(count: int) -> None:
     """Ask XLA for ``count`` CPU devices (before JAX starts its backend; 1: leave as is).
 
@@ -120,7 +109,7 @@ def use_cpu_devices(count: int) -> None:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from jcrowd.cli import emit
+    from jcrowd.cli.output import emit
 
     use_cpu_devices(args.cpu_devices)
     if args.coordinator:
@@ -143,6 +132,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _run(args: argparse.Namespace) -> dict[str, Any]:
+    from jcrowd.cli.runloop import load_model
     from jcrowd.crowd.devices import shard_state
     from jcrowd.crowd.simulate import prepare
     from jcrowd.errors import JcrowdError
@@ -240,131 +230,139 @@ PER_AGENT = frozenset(
 """Recorded arrays with one row per agent (the others are per camera or per bucket slot)."""
 
 
+def _record_keys(sim: Any, record: str) -> list[str]:
+    """The arrays recorded per step for ``--record``."""
+    keys = ["position", "heading", "level", "dots", "alive", "eye", "target"]
+    if record in ("visible", "all"):
+        keys += [f"{k}_{lv}" for lv in range(len(sim.config.capacities)) for k in FRAME_KEYS]
+    if record == "all":
+        keys += ["tau", "control", "control_next", "has_next", "stands"]
+    if sim.pool is not None:
+        keys.append("agent")
+    return keys
+
+
+FRAME_KEYS = ("slots", "valid", "points")
+"""A frame's per-level arrays, recorded with ``--record visible`` and ``all``."""
+
+
+def _snapshot(sim: Any, record: str, state: Any, view: Any) -> dict[str, Any]:
+    """Host copies of what is recorded of the state at a step's start (before the step takes
+    the state's buffers)."""
+    snapshot: dict[str, Any] = {
+        "position": state.position,
+        "heading": state.heading,
+        "alive": state.alive,
+        "eye": view.eye,
+        "target": view.target,
+    }
+    if sim.pool is not None:
+        snapshot["agent"] = state.agent
+    if record == "all":
+        control, _, _ = state.clip("current")
+        control_next, _, _ = state.clip("next")
+        snapshot.update(
+            tau=state.tau,
+            control=control,
+            control_next=control_next,
+            has_next=state.has_next,
+            stands=state.stands,
+        )
+    return _fetch(snapshot)
+
+
+def _frame_parts(frame: Any, record: str, nlev: int) -> dict[str, Any]:
+    """What is recorded or counted of a step's frame."""
+    parts = {
+        "level": frame.level,
+        "dots": frame.dots,
+        "overflow": frame.overflow,
+        "deferred": frame.deferred,
+        "crowding": frame.crowding,
+        "unblended": frame.unblended,
+    }
+    if record != "roots":
+        parts.update(
+            {f"{name}_{lv}": getattr(frame, name)[lv] for lv in range(nlev) for name in FRAME_KEYS}
+        )
+    return parts
+
+
 def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, Any], dict]:
     """Run ``steps`` steps with a progress bar; return the JSON summary and the recording."""
-    import jax
-    import jax.numpy as jnp
-    from rich.console import Console
-    from rich.progress import Progress
-
+    from jcrowd.cli.runloop import RunLoop
     from jcrowd.crowd.devices import in_agent_order
 
-    step = sim.compiled()
-    n = sim.num_agents
+    loop = RunLoop(sim, state)
     nlev = len(sim.config.capacities)
-    t0 = time.perf_counter()
-    warm = jax.tree.map(jnp.copy, state)  # the step donates its input state
-    # Compile (+ one step, dropped).
-    jax.block_until_ready(step(warm, sim.view_at(0.0), sim.dt_array))
-    compile_s = time.perf_counter() - t0
-    rec: dict[str, list] = {
-        k: [] for k in ("position", "heading", "level", "dots", "alive", "eye", "target")
-    }
-    if record in ("visible", "all"):
-        for lv in range(nlev):
-            for k in ("slots", "valid", "points"):
-                rec[f"{k}_{lv}"] = []
-    if record == "all":
-        for k in ("tau", "control", "control_next", "has_next", "stands"):
-            rec[k] = []
-    if sim.pool is not None:
-        rec["agent"] = []
-    times, hist = [], np.zeros(nlev + 1, np.int64)
-    overflow = deferred = dots = crowding = unblended = 0
-    with Progress(console=Console(file=sys.stderr), transient=True) as bar:
-        task = bar.add_task(f"{n:,} agents", total=steps)
-        for i in range(steps):
-            view = sim.view_at(i * sim.dt)
-            snapshot: dict[str, Any] = {
-                "position": state.position,
-                "heading": state.heading,
-                "alive": state.alive,
-                "eye": view.eye,
-                "target": view.target,
-            }
-            if sim.pool is not None:
-                snapshot["agent"] = state.agent
-            if record == "all":
-                control, _, _ = state.clip("current")
-                control_next, _, _ = state.clip("next")
-                snapshot.update(
-                    tau=state.tau,
-                    control=control,
-                    control_next=control_next,
-                    has_next=state.has_next,
-                    stands=state.stands,
-                )
-            host = _fetch(snapshot)  # before the step takes the state's buffers
-            t = time.perf_counter()
-            new, frame = step(state, view, sim.dt_array)
-            jax.block_until_ready(new)
-            times.append(time.perf_counter() - t)
-            parts = {
-                "level": frame.level,
-                "dots": frame.dots,
-                "overflow": frame.overflow,
-                "deferred": frame.deferred,
-                "crowding": frame.crowding,
-                "unblended": frame.unblended,
-            }
-            if record != "roots":
-                parts.update(
-                    {
-                        f"{name}_{lv}": getattr(frame, name)[lv]
-                        for lv in range(nlev)
-                        for name in ("slots", "valid", "points")
-                    }
-                )
-            host.update(_fetch(parts))
-            for key in PER_AGENT.intersection(host):  # agents may be interleaved over devices
-                host[key] = in_agent_order(host[key], new)
-            overflow += int(host.pop("overflow"))
-            deferred += int(host.pop("deferred"))
-            crowding = max(crowding, int(host.pop("crowding")))
-            unblended += int(host.pop("unblended"))
-            for key, value in host.items():
-                rec[key].append(value)
-            hist += np.bincount(np.asarray(host["level"]), minlength=nlev + 1)
-            dots += int(np.sum(host["dots"]))
-            state = new
-            bar.advance(task)
-    recompiles = step._cache_size() - 1
-    recording = {k: np.stack(v) for k, v in rec.items()}
-    cam = sim.scenario.camera
-    recording.update(
-        height=np.asarray(sim.spawn.height, np.float32),
-        group=np.asarray(sim.spawn.group, np.int32),
-        color=np.asarray(sim.spawn.color, np.float32),
-        fps=np.asarray(sim.scenario.fps),
-        lens=np.asarray([cam.fov_deg, cam.near, cam.far], np.float64),
-        levels=np.asarray(nlev),
-    )
-    if not sim.scenario.layout.empty:  # drawn by jcrowd render RUN.npz
-        from jcrowd.cli.render import scenario_obstacles
+    rec: dict[str, list] = {k: [] for k in _record_keys(sim, record)}
+    hist = np.zeros(nlev + 1, np.int64)
+    counts = dict.fromkeys(("overflow", "deferred", "crowding", "unblended", "dots"), 0)
 
-        recording["obstacles"] = scenario_obstacles(sim.scenario)
+    def before(state: Any, view: Any) -> dict[str, Any]:
+        return _snapshot(sim, record, state, view)
+
+    for _, host, frame in loop.frames(steps, f"{sim.num_agents:,} agents", before):
+        host.update(_fetch(_frame_parts(frame, record, nlev)))
+        for key in PER_AGENT.intersection(host):  # agents may be interleaved over devices
+            host[key] = in_agent_order(host[key], loop.state)
+        for key in ("overflow", "deferred", "unblended"):
+            counts[key] += int(host.pop(key))
+        counts["crowding"] = max(counts["crowding"], int(host.pop("crowding")))
+        for key, value in host.items():
+            rec[key].append(value)
+        hist += np.bincount(np.asarray(host["level"]), minlength=nlev + 1)
+        counts["dots"] += int(np.sum(host["dots"]))
+    recording = {k: np.stack(v) for k, v in rec.items()}
+    recording.update(_run_constants(sim, nlev))
+    return _summary(sim, loop, steps, hist, counts), recording
+
+
+def _run_constants(sim: Any, nlev: int) -> dict[str, np.ndarray]:
+    """What a recording holds once: agents' heights, groups and colours, the rate, the lens,
+    the level count and, with a layout, the obstacles' prisms (drawn by ``jcrowd render``)."""
+    from jcrowd.cli.runloop import scenario_obstacles
+
+    cam = sim.scenario.camera
+    out = {
+        "height": np.asarray(sim.spawn.height, np.float32),
+        "group": np.asarray(sim.spawn.group, np.int32),
+        "color": np.asarray(sim.spawn.color, np.float32),
+        "fps": np.asarray(sim.scenario.fps),
+        "lens": np.asarray([cam.fov_deg, cam.near, cam.far], np.float64),
+        "levels": np.asarray(nlev),
+    }
+    if not sim.scenario.layout.empty:
+        out["obstacles"] = scenario_obstacles(sim.scenario)
+    return out
+
+
+def _summary(
+    sim: Any, loop: Any, steps: int, hist: np.ndarray, counts: dict[str, int]
+) -> dict[str, Any]:
+    """The run's JSON summary (the module docstring names the keys)."""
     result = {
-        "agents": n,
+        "agents": sim.num_agents,
         "steps": steps,
-        "ms_per_step_median": 1e3 * float(np.median(times)),
-        "compile_s": compile_s,
+        "ms_per_step_median": 1e3 * float(np.median(loop.step_seconds)),
+        "compile_s": loop.compile_s,
         "level_histogram": (hist / steps).round(1).tolist(),
-        "dots_per_step": dots / steps,
-        "recompiles": int(recompiles),
-        "overflow_per_step": overflow / steps,
-        "deferred_clips": deferred,
-        "crowding_max": crowding,
-        "unblended_changes": unblended,
-        "alive_end": int(np.sum(_fetch(state.alive))),
+        "dots_per_step": counts["dots"] / steps,
+        "recompiles": loop.recompiles,
+        "overflow_per_step": counts["overflow"] / steps,
+        "deferred_clips": counts["deferred"],
+        "crowding_max": counts["crowding"],
+        "unblended_changes": counts["unblended"],
+        "alive_end": int(np.sum(_fetch(loop.state.alive))),
     }
     # Agents placed at t = 0 plus those [[sources]] added (each slot counts the agents it has
     # taken); an agent no longer alive has left through its goal or at its path's end.
-    result["spawned"] = sim.scenario.num_agents + int(np.sum(_fetch(state.next_row)))
+    result["spawned"] = sim.scenario.num_agents + int(np.sum(_fetch(loop.state.next_row)))
     result["exited"] = result["spawned"] - result["alive_end"]
     if sim.pool is not None:
         due = int(np.sum(np.asarray(sim.pool.times) < steps * sim.dt))
         result["spawn_late"] = sim.scenario.num_agents + due - result["spawned"]
-    return result, recording
+    return result
 
 
 def _print(result: dict[str, Any]) -> None:

@@ -46,7 +46,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from rich.progress import Progress
 
-    from jcrowd.cli import emit
+    from jcrowd.cli.output import emit
     from jcrowd.io.atomic import write_atomic
     from jcrowd.io.bvh import read_bvh
     from jcrowd.io.bvh_write import write_bvh

@@ -1,17 +1,12 @@
-"""The online step: crowd state, LOD buckets, per-level synthesis, clip scheduling.
+"""The animated crowd step: crowd state, LOD buckets, per-level synthesis, clip scheduling.
 
-One ``jit``-compiled step advances every agent (papers 000 §4–5, 003 §3);
-:func:`prepare` builds it from a scenario and a motion model, and :func:`agent_motion` turns
-a recorded agent back into a clip. It never touches files, rendering or the CLI (an import
-contract checked in CI).
+One ``jit``-compiled step advances every agent (papers 000 §4–5, 003 §3): its dynamics stage
+is the pedestrian step of :mod:`jcrowd.pedestrians`, then levels of detail, per-level decode
+and forward kinematics, level blending and the next clips. :func:`prepare` builds it from a
+scenario and a motion model. It never touches files, rendering, the CLI or the rollouts
+(import contracts checked in CI).
 """
 
-from jcrowd.crowd.avoidance import AvoidanceParams as AvoidanceParams
-from jcrowd.crowd.avoidance import Motion as Motion
-from jcrowd.crowd.avoidance import avoid as avoid
-from jcrowd.crowd.avoidance import avoid_one as avoid_one
-from jcrowd.crowd.avoidance import closest_on_segments as closest_on_segments
-from jcrowd.crowd.blocking import OneStepAtATime as OneStepAtATime
 from jcrowd.crowd.clips import CrowdModel as CrowdModel
 from jcrowd.crowd.clips import build_crowd_model as build_crowd_model
 from jcrowd.crowd.clips import choose_controls as choose_controls
@@ -27,45 +22,12 @@ from jcrowd.crowd.devices import on_all_devices as on_all_devices
 from jcrowd.crowd.devices import per_device_config as per_device_config
 from jcrowd.crowd.devices import shard_state as shard_state
 from jcrowd.crowd.devices import split_step as split_step
-from jcrowd.crowd.dynamics import Pedestrians as Pedestrians
-from jcrowd.crowd.dynamics import StepInfo as StepInfo
-from jcrowd.crowd.dynamics import World as World
-from jcrowd.crowd.dynamics import build_world as build_world
-from jcrowd.crowd.dynamics import pedestrian_step as pedestrian_step
-from jcrowd.crowd.dynamics import split_pedestrian_step as split_pedestrian_step
-from jcrowd.crowd.dynamics import wall_segments as wall_segments
-from jcrowd.crowd.dynamics import walls_near_cells as walls_near_cells
-from jcrowd.crowd.export import RECORD_KEYS as RECORD_KEYS
-from jcrowd.crowd.export import agent_motion as agent_motion
-from jcrowd.crowd.grid_avoidance import CANDIDATE_TIERS as CANDIDATE_TIERS
-from jcrowd.crowd.grid_avoidance import avoid_in_grid as avoid_in_grid
 from jcrowd.crowd.lod import Buckets as Buckets
 from jcrowd.crowd.lod import CameraView as CameraView
 from jcrowd.crowd.lod import assign_buckets as assign_buckets
 from jcrowd.crowd.lod import distance_levels as distance_levels
 from jcrowd.crowd.lod import in_frustum as in_frustum
 from jcrowd.crowd.lod import screen_height_px as screen_height_px
-from jcrowd.crowd.navigation import UNREACHABLE as UNREACHABLE
-from jcrowd.crowd.navigation import FieldGrid as FieldGrid
-from jcrowd.crowd.navigation import Navigation as Navigation
-from jcrowd.crowd.navigation import desired_directions as desired_directions
-from jcrowd.crowd.navigation import distance_field as distance_field
-from jcrowd.crowd.navigation import field_grid as field_grid
-from jcrowd.crowd.navigation import field_values as field_values
-from jcrowd.crowd.navigation import rasterize as rasterize
-from jcrowd.crowd.neighbours import CellList as CellList
-from jcrowd.crowd.neighbours import GridSpec as GridSpec
-from jcrowd.crowd.neighbours import candidates as candidates
-from jcrowd.crowd.neighbours import cell_index as cell_index
-from jcrowd.crowd.neighbours import cell_list as cell_list
-from jcrowd.crowd.neighbours import compact_candidates as compact_candidates
-from jcrowd.crowd.neighbours import grid_spec as grid_spec
-from jcrowd.crowd.neighbours import near_places as near_places
-from jcrowd.crowd.scene import MAX_FIELD_BYTES as MAX_FIELD_BYTES
-from jcrowd.crowd.scene import NAV_CELL_M as NAV_CELL_M
-from jcrowd.crowd.scene import Scene as Scene
-from jcrowd.crowd.scene import build_scene as build_scene
-from jcrowd.crowd.scene import scene_bytes as scene_bytes
 from jcrowd.crowd.schedule import schedule as schedule
 from jcrowd.crowd.simulate import Simulation as Simulation
 from jcrowd.crowd.simulate import prepare as prepare
@@ -80,7 +42,6 @@ from jcrowd.crowd.state import refresh_far_cores as refresh_far_cores
 from jcrowd.crowd.steering import TURN_RATE as TURN_RATE
 from jcrowd.crowd.steering import aim_point as aim_point
 from jcrowd.crowd.steering import current_field as current_field
-from jcrowd.crowd.steering import steer as steer
 from jcrowd.crowd.steering import turn_towards as turn_towards
 from jcrowd.crowd.steering import waypoint_xz as waypoint_xz
 from jcrowd.crowd.stepping import bucket_chunk as bucket_chunk

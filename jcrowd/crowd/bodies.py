@@ -1,4 +1,4 @@
-"""Skinned bodies per level of detail (issue 20; paper 003 §5.1): a bound body's meshes skinned
+"""Skinned bodies per level of detail (paper 003 §5.1): a bound body's meshes skinned
 to each level's kept joints, for a renderer that has the step's points.
 
 Every level gets every resolution of the body (the renderer picks one per agent by its size on

@@ -19,10 +19,10 @@ import numpy as np
 from jcrowd.crowd.clips import CrowdModel
 from jcrowd.crowd.lod import CameraView
 from jcrowd.crowd.pool import Pool
-from jcrowd.crowd.scene import Scene
 from jcrowd.crowd.state import CrowdState, Frame, StepConfig
 from jcrowd.crowd.stepping import step
 from jcrowd.errors import ScenarioError
+from jcrowd.pedestrians.world import World
 
 __all__ = [
     "agent_mesh",
@@ -115,11 +115,30 @@ def per_device_config(config: StepConfig, devices: int) -> StepConfig:
     )
 
 
+def _with_crowd_counters(frame: Frame, gathered: list[jax.Array]) -> Frame:
+    """One device's frame with the crowd's counters: overflow, deferred clips and unblended
+    changes summed over the devices, the crowding (every device fills the same grid) the
+    largest. The four cross in one collective, ordered after the positions' gather."""
+    counters = jnp.stack([frame.overflow, frame.deferred, frame.crowding, frame.unblended]).astype(
+        jnp.int32
+    )
+    if gathered:
+        counters, _ = jax.lax.optimization_barrier((counters, gathered))
+    every = jax.lax.all_gather(counters, "agents")  # (K, 4)
+    return replace(
+        frame,
+        overflow=every[:, 0].sum().astype(frame.overflow.dtype),
+        deferred=every[:, 1].sum().astype(frame.deferred.dtype),
+        crowding=every[:, 2].max().astype(frame.crowding.dtype),
+        unblended=every[:, 3].sum().astype(frame.unblended.dtype),
+    )
+
+
 def split_step(
     crowd: CrowdModel,
     config: StepConfig,
     devices: list[Any],
-    scene: Scene | None = None,
+    world: World | None = None,
     pool: Pool | None = None,
 ) -> Any:
     """The step over several devices: each runs it on its own block of agents.
@@ -157,33 +176,12 @@ def split_step(
         device = jax.lax.axis_index("agents")
         # The block's rows in the gathered crowd: device k's block follows devices 0 … k − 1.
         rows = device * n_local + jnp.arange(n_local, dtype=jnp.int32)
-        new, frame = step(crowd, local_config, state, view, dt, gather, rows, scene, pool)
+        new, frame = step(crowd, local_config, state, view, dt, gather, rows, world, pool)
         slots = tuple(  # local slot s holds agent s·K + k (agent_order)
             jnp.where(ok, s * k + device, n_local * k).astype(s.dtype)
             for s, ok in zip(frame.slots, frame.valid, strict=True)
         )
-        # The four counters cross devices in one collective (each is a rendezvous of every
-        # device), ordered after the positions' gather.
-        counters = jnp.stack(
-            [frame.overflow, frame.deferred, frame.crowding, frame.unblended]
-        ).astype(jnp.int32)
-        if gathered:
-            counters, _ = jax.lax.optimization_barrier((counters, gathered))
-        every = jax.lax.all_gather(counters, "agents")  # (K, 4)
-        # Every device sorted the whole crowd into the grid: its crowding is already the total.
-        overflow, deferred, crowding = every[:, 0].sum(), every[:, 1].sum(), every[:, 2].max()
-        unblended = every[:, 3].sum()
-        return new, Frame(
-            slots,
-            frame.valid,
-            frame.points,
-            frame.level,
-            frame.dots,
-            overflow.astype(frame.overflow.dtype),
-            deferred.astype(frame.deferred.dtype),
-            crowding.astype(frame.crowding.dtype),
-            unblended.astype(frame.unblended.dtype),
-        )
+        return new, _with_crowd_counters(replace(frame, slots=slots), gathered)
 
     agents, same = P("agents"), P()
     nlev = len(config.capacities)

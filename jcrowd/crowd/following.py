@@ -1,4 +1,4 @@
-"""Walkers following the simulated crowd (issue 19): the gait phase advances with the distance
+"""Walkers following the simulated crowd: the gait phase advances with the distance
 the root walks, and a slow agent stands at a double-support phase.
 
 With the crowd dynamics on (:attr:`~jcrowd.crowd.state.StepConfig.avoid`) the simulation moves
@@ -33,20 +33,21 @@ double-support phase and waits there (:func:`follow_phase`)."""
 
 SHUFFLE_BELOW = 0.2
 """With the dynamics on, an agent slower than this (m/s) but not standing shuffles: its phase
-runs at most :data:`SHUFFLE_CADENCE` times the model's mean cadence (issue 19: nobody walks in
-place at walking cadence below 0.2 m/s)."""
+runs at most :data:`SHUFFLE_CADENCE` times the model's mean cadence (nobody walks in place at
+walking cadence below 0.2 m/s)."""
 
 SHUFFLE_CADENCE = 0.4
 """The cap of a shuffling agent's cadence, as a fraction of the model's mean. Without it the
 phase follows ``walked / stride`` frame by frame, and the time warp makes the clip's root
 travel per aligned frame small in parts of the cycle, so a walker at 0.1–0.2 m/s stepped at
-0.5–1.4 times the mean cadence for a frame or two (0.9 % of the slow agent-frames of the
-entrance run, 2026-12-03). Capped, the root walks a little ahead of the feet there."""
+0.5–1.4 times the mean cadence for a frame or two (about 1 % of the slow agent-frames of
+the entrance scenario, ``bench/follow.py``). Capped, the root walks a little ahead of the feet
+there."""
 
 STAND_APPROACH = 0.35
 """On its way to stand, the phase runs at this fraction of the model's mean cadence (a cycle per
 :attr:`~jcrowd.crowd.clips.CrowdModel.cycle_seconds`): below half a walk's, so an agent about
-to stand does not walk in place (issue 19). Not a fraction of the clip's own rate at the
+to stand does not walk in place. Not a fraction of the clip's own rate at the
 phase, ``dt·fps/ΔA``: the time warp makes that two or three times the mean in parts of the
 cycle (measured on the entrance run: 0.4 of it put 4 % of the slow agent-frames above half
 the mean cadence)."""
@@ -55,7 +56,7 @@ the mean cadence)."""
 def follow_phase(
     cm: CrowdModel, tau: Array, natural: Array, walked: Array, stride: Array, dt: Array
 ) -> Array:
-    """The phase step of an agent whose root the simulation moves (issue 19).
+    """The phase step of an agent whose root the simulation moves.
 
     Walking: the aligned frames that carry the clip's root as far as the agent walked this step,
     ``walked / stride`` with ``stride`` the clip's root travel per aligned frame at the phase

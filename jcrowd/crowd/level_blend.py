@@ -1,7 +1,7 @@
 """Level changes without popping: the drawn pose eases from the old level's to the new one's.
 
 When an agent's level of detail changes its pose would jump in one frame: a joint the new level
-freezes snaps to its frozen rotation, the core changes rank (issue 19). For
+freezes snaps to its frozen rotation, the core changes rank. For
 :data:`BLEND_SECONDS` after a change the step draws
 
     ``p = w·p_from + (1 − w)·p_level``,  ``w = left / BLEND_SECONDS``,

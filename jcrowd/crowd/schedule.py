@@ -17,10 +17,10 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool
 
 from jcrowd.crowd.clips import CrowdModel, next_clips_lod
-from jcrowd.crowd.navigation import field_values
-from jcrowd.crowd.scene import Scene
 from jcrowd.crowd.state import CrowdState, StepConfig
 from jcrowd.crowd.steering import aim_point, current_field, waypoint_xz
+from jcrowd.pedestrians.navigation import field_values
+from jcrowd.pedestrians.world import World
 
 __all__ = ["PASS_REACH", "schedule"]
 
@@ -30,24 +30,11 @@ past it along the next leg: a crowd converging on one point otherwise packs roun
 in front walking on towards the next waypoint against those still arriving."""
 
 
-def schedule(
-    cm: CrowdModel,
-    config: StepConfig,
-    state: CrowdState,
-    synthesized: Bool[Array, " N"],
-    scene: Scene | None = None,
-) -> tuple[CrowdState, Array]:
-    """Waypoints, next-clip choice at mid-cycle (bounded per step) and clip hand-over.
-
-    With a ``scene`` a waypoint is reached on entering its navigation target (field ≤ 0, see
-    :mod:`jcrowd.crowd.scene`: the reach disc cut by walls, or the goal region, so a goal
-    region works as an exit), never through a wall.
-
-    Agents synthesized this step get a kriged next clip, the others the nearest captured cycle
-    to the controls they aim at (:func:`jcrowd.crowd.clips.next_clips_lod`).
-    """
-    n = state.num_agents
-    last = float(cm.frames - 1)
+def _waypoints(config: StepConfig, state: CrowdState, world: World | None) -> tuple[Array, Array]:
+    """Each agent's waypoint after this step, and who is still alive: a waypoint within
+    ``reach`` (with avoidance, also one passed along the next leg within ``PASS_REACH``
+    reaches; in a layout, on entering its target) is reached; past the last of an open path
+    the agent leaves."""
     tx, tz = waypoint_xz(state.waypoints, state.waypoint)
     d2 = (tx - state.x) ** 2 + (tz - state.z) ** 2
     near = d2 < config.reach**2
@@ -57,14 +44,28 @@ def schedule(
         nx, nz = waypoint_xz(state.waypoints, jnp.where(nxt < state.num_waypoints, nxt, 0))
         past = (state.x - tx) * (nx - tx) + (state.z - tz) * (nz - tz) > 0.0
         near = near | (has_next & past & (d2 < (PASS_REACH * config.reach) ** 2))
-    if scene is not None:  # reached on entering the target (a goal region: the exit)
-        near = field_values(scene.nav, current_field(state), state.x, state.z) <= 0.0
+    if world is not None and world.nav is not None:  # on entering the target (goal: exit)
+        near = field_values(world.nav, current_field(state), state.x, state.z) <= 0.0
     reached = state.alive & near
     wp = state.waypoint + reached.astype(jnp.int32)
     done = wp >= state.num_waypoints
     wp = jnp.where(done & state.loop, 0, jnp.minimum(wp, state.num_waypoints - 1))
-    alive = state.alive & ~(done & ~state.loop)
+    return wp, state.alive & ~(done & ~state.loop)
 
+
+def _next_clips(
+    cm: CrowdModel,
+    config: StepConfig,
+    state: CrowdState,
+    alive: Array,
+    wp: Array,
+    synthesized: Bool[Array, " N"],
+) -> tuple[dict[str, Array], Array]:
+    """The next clip of each agent past the middle of its cycle without one (at most
+    ``refresh`` a step, kriged within ``krige_budget``): the slot's new control, mix and
+    duration and ``has_next``; and how many choices wait a step."""
+    n = state.num_agents
+    last = float(cm.frames - 1)
     need = alive & ~state.has_next & (state.tau >= last / 2)
     (idx,) = jnp.nonzero(need, size=min(config.refresh or n // 32 + 64, n), fill_value=n)
     safe = jnp.where(idx < n, idx, 0)
@@ -97,22 +98,43 @@ def schedule(
     )
     idx = jnp.where(done, idx, n)  # choices beyond the kriging budget wait a step
     slot = 1 - state.current[safe]
-    control = state.control.at[idx, slot].set(c, mode="drop")
-    mix = state.mix.at[idx, slot].set(a, mode="drop")
-    duration = state.duration.at[idx, slot].set(dur, mode="drop")
-    has_next = state.has_next.at[idx].set(True, mode="drop")
+    chosen = {
+        "control": state.control.at[idx, slot].set(c, mode="drop"),
+        "mix": state.mix.at[idx, slot].set(a, mode="drop"),
+        "duration": state.duration.at[idx, slot].set(dur, mode="drop"),
+        "has_next": state.has_next.at[idx].set(True, mode="drop"),
+    }
     deferred = jnp.sum(need, dtype=jnp.int32) - jnp.sum(idx < n, dtype=jnp.int32)
+    return chosen, deferred
 
+
+def schedule(
+    cm: CrowdModel,
+    config: StepConfig,
+    state: CrowdState,
+    synthesized: Bool[Array, " N"],
+    world: World | None = None,
+) -> tuple[CrowdState, Array]:
+    """Waypoints, next-clip choice at mid-cycle (bounded per step) and clip hand-over.
+
+    In a ``world`` with a layout a waypoint is reached on entering its navigation target
+    (field ≤ 0, see :mod:`jcrowd.pedestrians.scene`: the reach disc cut by walls, or the goal
+    region, so a goal region works as an exit), never through a wall.
+
+    Agents synthesized this step get a kriged next clip, the others the nearest captured cycle
+    to the controls they aim at (:func:`jcrowd.crowd.clips.next_clips_lod`).
+    """
+    last = float(cm.frames - 1)
+    wp, alive = _waypoints(config, state, world)
+    chosen, deferred = _next_clips(cm, config, state, alive, wp, synthesized)
     wrap = state.tau >= last
-    take = wrap & has_next
+    take = wrap & chosen["has_next"]
     # Only what scheduling changes; every other field (the slot's, the dynamics') passes through.
     changed: dict[str, Any] = {
+        **chosen,
         "tau": jnp.where(wrap, state.tau - last, state.tau),
-        "control": control,
-        "mix": mix,
-        "duration": duration,
         "current": jnp.where(take, 1 - state.current, state.current),
-        "has_next": has_next & ~take,
+        "has_next": chosen["has_next"] & ~take,
         "origin_x": jnp.where(wrap, state.x, state.origin_x),
         "origin_z": jnp.where(wrap, state.z, state.origin_z),
         "origin_heading": jnp.where(wrap, state.heading, state.origin_heading),

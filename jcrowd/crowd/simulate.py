@@ -26,18 +26,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jcrowd.crowd.blocking import OneStepAtATime
 from jcrowd.crowd.clips import CrowdModel, build_crowd_model
 from jcrowd.crowd.devices import on_all_devices, split_step
 from jcrowd.crowd.lod import CameraView
-from jcrowd.crowd.neighbours import GridSpec, grid_spec
 from jcrowd.crowd.pool import Pool, expected_stay, plan_pool
-from jcrowd.crowd.scene import Scene, build_scene, field_ids
 from jcrowd.crowd.state import CrowdState, Frame, StepConfig, init_state
 from jcrowd.crowd.stepping import default_capacities, step
 from jcrowd.errors import ScenarioError
 from jcrowd.model.motion_model import MotionModel
-from jcrowd.scenario.schema import Scenario, camera_at
+from jcrowd.pedestrians.blocking import OneStepAtATime
+from jcrowd.pedestrians.neighbours import GridSpec, grid_spec
+from jcrowd.pedestrians.scene import build_scene, field_ids
+from jcrowd.pedestrians.world import World
+from jcrowd.scenario.camera import camera_at
+from jcrowd.scenario.schema import Scenario
 from jcrowd.scenario.spawning import Spawn, spawn, spawn_sources
 
 __all__ = [
@@ -85,7 +87,7 @@ class Simulation:
     config: StepConfig
     scenario: Scenario
     spawn: Spawn
-    scene: Scene | None = None
+    world: World | None = None
     pool: Pool | None = None
 
     @property
@@ -138,14 +140,14 @@ class Simulation:
         agents): the state passed in must not be used again; copy it first if it must
         (``jax.tree.map(jnp.copy, state)``).
         """
-        crowd, config, scene, pool = self.crowd, self.config, self.scene, self.pool
+        crowd, config, world, pool = self.crowd, self.config, self.world, self.pool
 
         def run(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
-            return step(crowd, config, state, view, dt, scene=scene, pool=pool)
+            return step(crowd, config, state, view, dt, world=world, pool=pool)
 
         devices = jax.devices()
         if len(devices) > 1:
-            run = split_step(crowd, config, devices, scene, pool)
+            run = split_step(crowd, config, devices, world, pool)
         options = step_compiler_options()
         donated = (0,) if donate else ()
         if options:
@@ -177,8 +179,9 @@ def _neighbour_grid(scenario: Scenario) -> GridSpec:
 def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdState]:
     """Build the simulation and its first state (deterministic from ``scenario.seed``).
 
-    A layout (obstacles, walls, walkable area) becomes the step's :class:`Scene`: navigation
-    fields per waypoint and the walls (:func:`~jcrowd.crowd.scene.build_scene`).
+    A layout (obstacles, walls, walkable area) becomes the step's
+    :class:`~jcrowd.pedestrians.world.World`: navigation fields per waypoint and the walls
+    (:func:`~jcrowd.pedestrians.scene.build_scene`).
 
     Raises:
         ScenarioError: settings that do not fit the model, or a layout whose navigation fields
@@ -227,11 +230,11 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         avoidance=scenario.dynamics.avoidance,
     )
     config.check(levels)
-    scene = None
+    world = None
     if not scenario.layout.empty:
-        scene, _ = build_scene(scenario, sp, cast(GridSpec, config.grid), config.reach)
+        world, _ = build_scene(scenario, sp, cast(GridSpec, config.grid), config.reach)
     key_slots, key_sources = jax.random.split(jax.random.key(scenario.seed))
-    arrays = _state_arrays(scenario, sp, scene is not None)
+    arrays = _state_arrays(scenario, sp, world is not None)
     pool = None
     if queue is not None:
         n0 = scenario.num_agents
@@ -240,7 +243,7 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         arrays["agent"] = np.where(np.arange(agents) < n0, np.arange(agents), -1)
         reservoir = init_state(
             crowd,
-            _state_arrays(scenario, sources, scene is not None),
+            _state_arrays(scenario, sources, world is not None),
             key_sources,
             resting=config.avoid,
         )
@@ -252,7 +255,7 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         key_slots if pool is not None else jax.random.key(scenario.seed),
         resting=config.avoid,
     )
-    return Simulation(crowd, config, scenario, sp, scene, pool), state
+    return Simulation(crowd, config, scenario, sp, world, pool), state
 
 
 def _in_grid_order(sp: Spawn, grid: GridSpec) -> Spawn:
@@ -262,9 +265,7 @@ def _in_grid_order(sp: Spawn, grid: GridSpec) -> Spawn:
     With the dynamics on, the step reads the crowd in cell order every step (the grid's
     counting sort, the candidates' rows) and writes per-cell tables: with ids in spawn order
     those reads jump over the whole crowd, with ids in cell order they run nearly in sequence.
-    Measured on the plaza (two CPU devices, alternated steps in one process): 30.0 → 28.4 ms
-    at 100k agents, 305 → 280 ms at 1M. The order holds at the start and loosens as people
-    walk (nothing re-sorts the crowd later).
+    The order holds at the start and loosens as people walk (nothing re-sorts the crowd later).
     """
     ix = np.clip(np.floor((sp.position[:, 0] - grid.origin[0]) / grid.cell), 0, grid.shape[0] - 1)
     iz = np.clip(np.floor((sp.position[:, 1] - grid.origin[1]) / grid.cell), 0, grid.shape[1] - 1)

@@ -17,11 +17,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.avoidance import AvoidanceParams
 from jcrowd.crowd.clips import CrowdModel, next_clips
-from jcrowd.crowd.neighbours import GridSpec
 from jcrowd.crowd.synthesis import clip_core
 from jcrowd.errors import JcrowdError
+from jcrowd.pedestrians.neighbours import GridSpec
+from jcrowd.pedestrians.params import AvoidanceParams
 
 __all__ = ["DEFAULT_RADIUS", "CrowdState", "Frame", "StepConfig", "init_state", "refresh_far_cores"]
 
@@ -63,10 +63,10 @@ class StepConfig:
             (or not drawn) compute their avoidance every ``far_every`` steps, in turn, and
             walk on at their last velocity in between (1: everyone every step).
         anticipate: with ``avoid``, agents anticipate each other's paths (the anticipation
-            velocity model's reading in :mod:`jcrowd.crowd.avoidance`); off: the plain
+            velocity model's reading in :mod:`jcrowd.pedestrians.avoidance`); off: the plain
             collision-free speed model.
         avoidance: ``(name, value)`` pairs set on
-            :class:`~jcrowd.crowd.avoidance.AvoidanceParams` (e.g. calibrated ones,
+            :class:`~jcrowd.pedestrians.params.AvoidanceParams` (e.g. calibrated ones,
             ``[dynamics] params``); the others keep their defaults.
     """
 
@@ -164,7 +164,7 @@ class CrowdState(eqx.Module):
     num_waypoints: Int[Array, " N"]
     loop: Bool[Array, " N"]
     waypoint: Int[Array, " N"]  # index of the waypoint being walked to
-    # Navigation field per waypoint (jcrowd.crowd.scene); −1 without a layout (walk straight).
+    # Navigation field per waypoint (jcrowd.pedestrians.scene); −1 without a layout (walk straight).
     field: Int[Array, "N K"]
     vx: Float[Array, " N"]  # simulated velocity (m/s) when the step avoids (else the spawn one)
     vz: Float[Array, " N"]
@@ -255,42 +255,27 @@ def init_state(
     ``spawn`` holds ``position (N, 2)``, ``heading``, ``height``, ``speed`` ``(N,)``,
     ``waypoints (N, K, 2)``, ``num_waypoints (N,)``, ``loop (N,)``, and optionally ``radius``
     ``(N,)`` (default :data:`DEFAULT_RADIUS`), ``field`` ``(N, K)`` (each waypoint's
-    navigation field, :func:`jcrowd.crowd.scene.build_scene`; default −1: none), and for a pool
-    with sources (:mod:`jcrowd.crowd.pool`) ``queue`` ``(N, Q)``, ``agent`` and ``alive``
+    navigation field, :func:`jcrowd.pedestrians.scene.build_scene`; default −1: none), and for a
+    pool with sources (:mod:`jcrowd.crowd.pool`) ``queue`` ``(N, Q)``, ``agent`` and ``alive``
     ``(N,)`` (defaults: no queue, agent ``i`` in slot ``i``, everyone alive).
 
     ``resting``: the first velocity is 0, not the free speed along the heading. With the crowd
     dynamics on, an agent then waits for its first avoidance update: a far agent updating every
-    ``far_every`` steps otherwise walks its first steps blind (measured on the 1M-agent plaza
-    with ``far_every = 4``: 1,300 agents closer than 0.9 (rᵢ + rⱼ), down to 0.46, in the first
-    8 steps).
+    ``far_every`` steps would otherwise walk its first steps blind, into its neighbours.
     """
     n = spawn["position"].shape[0]
     heading = jnp.asarray(spawn["heading"], jnp.float32)
     pos = jnp.asarray(spawn["position"], jnp.float32)
-    # A zero-length "previous cycle" ending where the agent stands: next_clips then plans the
-    # first cycle from the spawn pose.
-    origin = jnp.concatenate([pos, heading[:, None]], axis=1)
-    zero = jnp.zeros((n, cm.lo.shape[0]), jnp.float32)
     waypoints = jnp.asarray(spawn["waypoints"], jnp.float32)
-    target = waypoints[:, 0]
     height = jnp.asarray(spawn["height"], jnp.float32)
     speed = jnp.asarray(spawn["speed"], jnp.float32)
-    c, a, dur = _first_clips(cm, origin, zero, target, speed, height, min_reliability)
-    last = float(cm.frames - 1)
-    tau = jax.random.uniform(key, (n,), jnp.float32, 0.0, last)
-    has_next = tau >= last / 2
-    c2, a2, dur2 = _first_clips(cm, origin, c, target, speed, height, min_reliability)
+    clips = _initial_clips(cm, pos, heading, waypoints[:, 0], speed, height, key, min_reliability)
     return CrowdState(
+        **clips,
         x=pos[:, 0],
         z=pos[:, 1],
         heading=heading,
-        tau=tau,
-        control=jnp.stack([c, jnp.where(has_next[:, None], c2, c)], axis=1),
-        mix=jnp.stack([a, jnp.where(has_next[:, None], a2, a)], axis=1),
-        duration=jnp.stack([dur, jnp.where(has_next, dur2, dur)], axis=1),
         current=jnp.zeros(n, jnp.int32),
-        has_next=has_next,
         # Copies: a donated state must not hold one buffer in two fields.
         origin_x=jnp.copy(pos[:, 0]),
         origin_z=jnp.copy(pos[:, 1]),
@@ -320,6 +305,37 @@ def init_state(
         next_row=jnp.zeros(n, jnp.int32),
         agent=jnp.asarray(spawn.get("agent", np.arange(n)), jnp.int32),
     )
+
+
+def _initial_clips(
+    cm: CrowdModel,
+    pos: Array,
+    heading: Array,
+    target: Array,
+    speed: Array,
+    height: Array,
+    key: Array,
+    min_reliability: float,
+) -> dict[str, Any]:
+    """Each agent's first clip, its phase (uniform over the cycle, from ``key``) and, past the
+    cycle's middle, its next clip: the clip-slot fields of :class:`CrowdState`."""
+    n = pos.shape[0]
+    # A zero-length "previous cycle" ending where the agent stands: next_clips then plans the
+    # first cycle from the spawn pose.
+    origin = jnp.concatenate([pos, heading[:, None]], axis=1)
+    zero = jnp.zeros((n, cm.lo.shape[0]), jnp.float32)
+    c, a, dur = _first_clips(cm, origin, zero, target, speed, height, min_reliability)
+    last = float(cm.frames - 1)
+    tau = jax.random.uniform(key, (n,), jnp.float32, 0.0, last)
+    has_next = tau >= last / 2
+    c2, a2, dur2 = _first_clips(cm, origin, c, target, speed, height, min_reliability)
+    return {
+        "tau": tau,
+        "control": jnp.stack([c, jnp.where(has_next[:, None], c2, c)], axis=1),
+        "mix": jnp.stack([a, jnp.where(has_next[:, None], a2, a)], axis=1),
+        "duration": jnp.stack([dur, jnp.where(has_next, dur2, dur)], axis=1),
+        "has_next": has_next,
+    }
 
 
 @eqx.filter_jit

@@ -1,45 +1,36 @@
-"""The crowd step's dynamics stage: where each agent walks, avoiding the others (DESIGN §5b).
+"""The crowd step's dynamics stage and the body that follows it (DESIGN §5b).
 
 With :attr:`~jcrowd.crowd.state.StepConfig.avoid` on, the simulation is the authority on
-where people are: each alive agent's velocity comes from the collision-free speed model,
-anticipating with :attr:`~jcrowd.crowd.state.StepConfig.anticipate`
-(:mod:`jcrowd.crowd.avoidance`) — its desired direction straight towards its current waypoint
-(or, with a layout, down the waypoint's navigation field: :mod:`jcrowd.crowd.scene`; the
-scene's walls then repel too), its free speed, and its neighbours from the cell grid
-(:mod:`jcrowd.crowd.neighbours`) — and its root moves by ``v·dt``. The body turns towards the
-velocity at most :data:`TURN_RATE` rad/s (a walker turns its whole body over about a step, not
-in one frame), and the next gait cycle is chosen from the velocity (:func:`aim_point`), so the
-clips follow the simulated path.
-
-With the crowd split over devices each device steps its own block of agents, but neighbours
-live on every device: ``gather`` assembles the whole crowd's positions, radii and alive flags
-(an all-gather of ``(N, 4)`` floats: 16 MB at 1M agents; ``(N, 6)``, 24 MB, when agents
-anticipate: their velocities too) and every device fills the same grid
-from them. ``ids`` are the block's agents' rows in the gathered arrays.
+where people are: :func:`walk` calls the pedestrian step (:mod:`jcrowd.pedestrians`) for each
+alive agent — towards its current waypoint, down the waypoint's navigation field in a layout,
+among its neighbours — and the root moves by ``v·dt``. The body turns towards the velocity at
+most :data:`TURN_RATE` rad/s (:func:`turn_towards`: a walker turns its whole body over about a
+step, not in one frame; a slow one turns slower, as people shuffling in a queue sidestep
+rather than turn), and the next gait cycle is chosen from the velocity (:func:`aim_point`), so
+the clips follow the simulated path.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import cast
 
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.avoidance import AvoidanceParams, Motion
-from jcrowd.crowd.grid_avoidance import avoid_in_grid
-from jcrowd.crowd.navigation import desired_directions, field_values
-from jcrowd.crowd.neighbours import GridSpec, cell_index, cell_list
-from jcrowd.crowd.scene import Scene
-from jcrowd.crowd.state import CrowdState
+from jcrowd.crowd.state import CrowdState, StepConfig
 from jcrowd.motion.fastmath import sincos
+from jcrowd.pedestrians.neighbours import GridSpec
+from jcrowd.pedestrians.step import Pedestrians, pedestrian_step
+from jcrowd.pedestrians.world import World, open_world
 
 __all__ = [
     "TURN_RATE",
     "aim_point",
     "current_field",
     "due_rows",
-    "steer",
     "turn_towards",
+    "walk",
     "waypoint_xz",
 ]
 
@@ -75,107 +66,49 @@ def current_field(state: CrowdState) -> Int[Array, " N"]:
     return jnp.take_along_axis(state.field, state.waypoint[:, None], axis=1)[:, 0]
 
 
-def steer(
-    grid: GridSpec,
-    x: Array,
-    z: Array,
-    tx: Array,
-    tz: Array,
-    speed: Array,
-    radius: Array,
-    alive: Array,
+def walk(
+    config: StepConfig,
+    world: World | None,
+    state: CrowdState,
+    near: Bool[Array, " N"],
+    dt: Array,
     gather: Callable[[Array], Array] | None = None,
     ids: Array | None = None,
-    scene: Scene | None = None,
-    field: Array | None = None,
-    due: Array | None = None,
-    previous: tuple[Array, Array] | None = None,
-    anticipate: bool = False,
-    dt: Array | float = 1 / 30,
-    params: AvoidanceParams | None = None,
 ) -> tuple[Array, Array, Array]:
-    """Velocity ``(vx, vz)`` (m/s) of each agent walking to ``(tx, tz)``, and the grid overflow.
+    """The crowd step's dynamics stage: each agent's velocity ``(vx, vz)`` this step and the
+    neighbour grid's overflow, from :func:`~jcrowd.pedestrians.step.pedestrian_step`.
 
-    Agents not alive get velocity 0 and are nobody's neighbour. Without ``gather`` the arrays
-    are the whole crowd; with it they are one block, ``gather`` maps a block's ``(n, c)`` array
-    to the whole crowd's ``(N, c)`` and ``ids`` are the block's rows in it. With a ``scene``
-    and each agent's ``field`` the desired direction runs down that field until the agent is
-    inside its target (then straight at ``(tx, tz)``), and the scene's walls repel.
-
-    ``due`` (simulation level of detail): the rows whose velocity is computed this step, a
-    fixed-size index array (``n`` pads it); the others keep their ``previous`` velocity
-    ``(vx, vz)``. Every agent is still everyone's neighbour at its current position. An agent
-    computed here walks its velocity until its next update, ``dt`` s (one per agent), so its
-    speed is capped to close at most half its gap to any neighbour in that time
-    (:func:`~jcrowd.crowd.avoidance.approach_cap`).
-
-    ``anticipate``: agents predict their neighbours' paths from the ``previous`` velocities
-    (which the gather then also carries: 24 bytes per agent instead of 16) and relax their
-    direction over the reaction time, by the ``dt`` s since their last update (a scalar, or
-    one per agent: far agents updating every k steps relax by k steps at a time;
-    :mod:`jcrowd.crowd.avoidance`).
-
-    ``params``: the avoidance model's parameters (default: its defaults).
+    The agents walk towards their current waypoint (down its field in a ``world`` with a
+    layout, straight at it without one: :func:`~jcrowd.pedestrians.world.open_world`) with
+    their last velocities, so the velocity relaxes over the reaction time and, with
+    ``config.anticipate``, they anticipate. With ``config.far_every > 1`` only the ``near``
+    agents and every ``far_every``-th far one are computed this step (:func:`due_rows`); a far
+    agent relaxes by ``far_every`` steps at a time. ``gather``, ``ids``: on one device of
+    several, how the block sees the whole crowd.
     """
-    n = x.shape[0]
-    px, pz = (jnp.zeros(n, x.dtype), jnp.zeros(n, x.dtype)) if previous is None else previous
-    columns = [x, z, radius, alive.astype(x.dtype)] + ([px, pz] if anticipate else [])
-    mine = jnp.stack(columns, axis=1)
-    every = mine if gather is None else gather(mine)
-    pos, rad, live = every[:, :2], every[:, 2], every[:, 3] > 0.5
-    rows = jnp.arange(n, dtype=jnp.int32) if ids is None else ids
-    cells = cell_list(grid, pos, live)
-    motion = None
-    if previous is not None:  # over the reaction time, from the last velocities
-        elapsed = jnp.broadcast_to(jnp.asarray(dt, x.dtype), (n,))
-        crowd_v = every[:, 4:6] if anticipate else None
-        motion = Motion(jnp.stack([px, pz], axis=1), crowd_v, elapsed)
-    horizon = None
-    if due is not None:
-        sel = jnp.where(due < n, due, 0)
-        in_sel = alive[sel] & (due < n)
-        x, z, tx, tz, speed, radius, rows = (a[sel] for a in (x, z, tx, tz, speed, radius, rows))
-        field = None if field is None else field[sel]
-        horizon = jnp.broadcast_to(jnp.asarray(dt, x.dtype), (n,))[sel]
-        if motion is not None:
-            motion = Motion(motion.own[sel], motion.crowd, motion.dt[sel])
-    else:
-        in_sel = alive
-    dx, dz = tx - x, tz - z
-    norm = jnp.sqrt(dx * dx + dz * dz)
-    desired = jnp.stack([dx, dz], axis=1) / jnp.maximum(norm, 1e-6)[:, None]
-    desired = jnp.where((norm > 1e-6)[:, None], desired, 0.0)
-    if scene is not None and field is not None:
-        here_xz = jnp.stack([x, z], axis=1)
-        inside = field_values(scene.nav, field, x, z) <= 0.0
-        down = desired_directions(scene.nav, field, here_xz)
-        desired = jnp.where(inside[:, None], desired, down)
-    here = jnp.stack([x, z], axis=1)
-    if scene is None:
-        walls, wall_ids = jnp.zeros((0, 2, 2), x.dtype), jnp.zeros((x.shape[0], 1), jnp.int32)
-    else:
-        walls, wall_ids = scene.walls, scene.cell_walls[cell_index(grid, here)]
-    velocity = avoid_in_grid(
-        AvoidanceParams() if params is None else params,
-        grid,
-        cells,
-        here,
-        desired,
-        speed,
-        radius,
-        in_sel,
-        (pos, rad),
-        rows,
-        walls,
-        wall_ids,
-        motion,
-        horizon,
+    grid = cast(GridSpec, config.grid)  # StepConfig.check requires it with avoid
+    place = open_world(grid) if world is None else world
+    due, elapsed = None, None
+    if config.far_every > 1:  # simulation LOD: far agents in turn
+        n = state.num_agents
+        near_slots = sum(config.capacities[: config.blend_max_level + 1])
+        size = min(n, -(-n // config.far_every) + near_slots)
+        due = due_rows(near, state.clock, dt, config.far_every, size)
+        elapsed = jnp.where(near, dt, dt * config.far_every)  # since the last update
+    tx, tz = waypoint_xz(state.waypoints, state.waypoint)
+    peds = Pedestrians(
+        position=jnp.stack([state.x, state.z], axis=1),
+        target=current_field(state),
+        speed=state.speed,
+        radius=state.radius,
+        alive=state.alive,
+        velocity=jnp.stack([state.vx, state.vz], axis=1),
+        goal=jnp.stack([tx, tz], axis=1),
+        anticipate=config.anticipate,
     )
-    vx, vz = velocity[:, 0], velocity[:, 1]
-    if due is not None:
-        vx = jnp.where(alive, px.at[due].set(vx, mode="drop"), 0.0)
-        vz = jnp.where(alive, pz.at[due].set(vz, mode="drop"), 0.0)
-    return vx, vz, cells.overflow
+    params = config.avoidance_params()
+    _, info = pedestrian_step(params, place, peds, dt, gather, ids, due, elapsed)
+    return info.velocity[:, 0], info.velocity[:, 1], info.overflow
 
 
 def due_rows(
@@ -199,10 +132,8 @@ def turn_towards(heading: Array, vx: Array, vz: Array, dt: Array, min_speed: flo
     than ``min_speed`` m/s).
 
     A slow walker turns slowly: in a dense queue the simulated velocity's direction swings from
-    step to step as neighbours push, and a body chasing it at the full rate swings its planted
-    foot round (measured on the entrance run: the heading turned more than 2° in 80 % of the
-    planted-foot frames, most of them at 0.1–0.5 m/s); people shuffling in a queue sidestep
-    rather than turn.
+    step to step as neighbours push, and a body chasing it at the full rate would swing its
+    planted foot round; people shuffling in a queue sidestep rather than turn.
     """
     want = jnp.arctan2(vx, vz)  # heading θ faces (sin θ, cos θ)
     diff = jnp.remainder(want - heading + jnp.pi, 2 * jnp.pi) - jnp.pi

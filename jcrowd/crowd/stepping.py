@@ -1,52 +1,41 @@
-"""The crowd step: one compiled function advancing every agent (DESIGN §5, paper 000 §4.3, §5).
+"""The animated crowd step: one compiled function advancing every agent (DESIGN §5, 000 §4–5).
 
-``step(cm, config, state, view, dt) -> (state, frame)``:
+``step(cm, config, state, view, dt) -> (state, frame)`` runs named stages, top to bottom:
 
-1. **LOD** (:mod:`jcrowd.crowd.lod`): agents outside the view frustum are culled, and so are agents
-   shorter on screen than ``min_pixels`` (*detail culling*: a figure a few pixels tall shows no
-   limbs; the frame marks it as a ``dot`` for the renderer); the others get the finest level
-   their camera distance allows (with hysteresis) and are bucketed into the levels' static
-   capacities by importance. Agents beyond the last capacity become dots too (counted in
-   ``overflow``).
-2. **Synthesis** per level (:mod:`jcrowd.crowd.synthesis`), ``vmap`` over the level's bucket padded
-   to its capacity, run only on the chunks of slots that hold agents (:func:`decode_bucket`): the
-   pose at phase τ, blended with the next clip for levels ≤
-   ``blend_max_level``; FK on the level's skeleton; the root advances by the decoded velocity
-   and yaw rate, and τ by ``dt · fps / ΔA(τ)`` (the inverse time-warp, 001 §3.5).
-3. **Culled agents** advance their root only, by dead reckoning along the arc their clip's
-   controls ``(dx, dz, dyaw)`` describe, at the clip's mean rate (000 §4.3: "only the position
-   and orientation of the root node are computed ... in an invisible area").
-4. **Clips** (:mod:`jcrowd.crowd.clips`): an agent passing the middle of its cycle chooses the next
-   (at most ``refresh`` agents per step, of which at most ``krige_budget`` synthesized ones get
-   a kriged clip; the rest wait a step and are counted). Agents not synthesized this step get
-   the nearest captured cycle to the controls they aim at, without a kriging solve
-   (:func:`jcrowd.crowd.clips.next_clips_lod`). At the cycle's end the next clip takes over.
+1. **Level of detail** (:mod:`jcrowd.crowd.lod`): agents outside the view frustum are culled,
+   and so are those shorter on screen than ``min_pixels`` (a ``dot`` for the renderer); the
+   others get the finest level their camera distance allows (with hysteresis) and fill the
+   levels' static capacities by importance; the excess becomes dots (``overflow``).
+2. **Dynamics** (with ``[dynamics] avoid``; :func:`jcrowd.crowd.steering.walk`): the
+   pedestrian step of :mod:`jcrowd.pedestrians` gives each agent its velocity. It runs before
+   the synthesis, so the phase follows the velocity the root walks in the same step.
+3. **Level blending** (:mod:`jcrowd.crowd.level_blend`): an agent whose level changed eases
+   from the old level's pose to the new one's over 0.3 s; the old level is decoded here.
+4. **Synthesis** per level (:mod:`jcrowd.crowd.synthesis`), ``vmap`` over the level's bucket,
+   run only on the chunks of slots that hold agents (:func:`decode_bucket`): the pose at phase
+   τ, blended with the next clip for levels ≤ ``blend_max_level``, FK on the level's
+   skeleton, τ advancing by ``dt · fps / ΔA(τ)`` (the inverse time-warp, 001 §3.5) — or, with
+   the dynamics, with the distance walked (:func:`~jcrowd.crowd.following.follow_phase`).
+   Culled agents advance their root only, by dead reckoning along their clip's arc (000 §4.3).
+5. **Root motion**: by ``v·dt`` with the dynamics (the heading turning towards the velocity;
+   below 0.1 m/s the agent stands at a double-support phase and keeps its heading), else by
+   the decoded motion, with the stance foot locked near the camera.
+6. **Clips** (:mod:`jcrowd.crowd.schedule`): waypoints, the next cycle chosen at mid-cycle
+   (bounded per step, kriged for synthesized agents), the hand-over at the cycle's end.
+7. **Frame**: the levels' slots and points, dots and the step's counters.
 
-Blending reading (000 §5 "blending the second half of the synthesized motion with the first
-half of the following motion"): the paper's clips are two strides, ours one gait cycle, so the
-phase-aligned reading is taken: over the old cycle's second half the pose eases (smoothstep)
-from the old clip to the new clip *at the same phase*, and at the cycle end the new clip
-continues from phase 0. Far levels switch at the cycle end without blending.
-
-An agent whose level changes eases from the old level's pose to the new one's over 0.3 s
-(:mod:`jcrowd.crowd.level_blend`): the renderer and recordings see the eased pose.
-
-With ``StepConfig.avoid`` (``[dynamics] avoid = true``) the crowd dynamics move the roots
-instead of step 2's decoded velocity and step 3's dead reckoning (:mod:`jcrowd.crowd.steering`:
-the collision-free speed model among neighbours, the body turning towards the velocity), the
-clips of step 4 follow the simulated velocity, the phase follows the distance walked (below
-0.1 m/s it waits at a double-support phase: the agent stands, and keeps its heading;
-:func:`~jcrowd.crowd.following.follow_phase`), and foot locking is off. The dynamics run
-before the synthesis, so the phase follows the velocity the root walks in the same step.
-
-Agents at the end of a non-looped path stop being ``alive`` (they leave the crowd; the count is
-in the frame). Everything has a static shape; no host round trip inside a step.
+Blending reading (000 §5, "blending the second half of the synthesized motion with the first
+half of the following motion"): the paper's clips are two strides, ours one gait cycle, so
+over the old cycle's second half the pose eases (smoothstep) from the old clip to the new clip
+*at the same phase*, and at the cycle end the new clip continues from phase 0. Far levels
+switch at the cycle end without blending. Everything has a static shape; no host round trip
+inside a step.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, cast
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -55,22 +44,22 @@ from jaxtyping import Array, Int
 
 from jcrowd.crowd.clips import CrowdModel, local_to_world
 from jcrowd.crowd.following import STAND_BELOW, follow_phase, stands_at
-from jcrowd.crowd.level_blend import blend_plan, blend_sources
+from jcrowd.crowd.level_blend import BlendRows, blend_plan, blend_sources
 from jcrowd.crowd.lod import (
+    Buckets,
     CameraView,
     assign_buckets,
     distance_levels,
     in_frustum,
     screen_height_px,
 )
-from jcrowd.crowd.neighbours import GridSpec
 from jcrowd.crowd.pool import Pool, spawn_due
-from jcrowd.crowd.scene import Scene
 from jcrowd.crowd.schedule import schedule
 from jcrowd.crowd.state import CrowdState, Frame, StepConfig, refresh_far_cores
-from jcrowd.crowd.steering import current_field, due_rows, steer, turn_towards, waypoint_xz
+from jcrowd.crowd.steering import turn_towards, walk
 from jcrowd.crowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
 from jcrowd.motion.fastmath import sincos
+from jcrowd.pedestrians.world import World
 
 __all__ = [
     "bucket_chunk",
@@ -242,30 +231,19 @@ def _dead_reckoning(
     return dtau, turn * frac, x * c + z * s, -x * s + z * c
 
 
-def step(
-    cm: CrowdModel,
-    config: StepConfig,
-    state: CrowdState,
-    view: CameraView,
-    dt: Array,
-    gather: Callable[[Array], Array] | None = None,
-    ids: Array | None = None,
-    scene: Scene | None = None,
-    pool: Pool | None = None,
-) -> tuple[CrowdState, Frame]:
-    """Advance the crowd by ``dt`` seconds and return the frame at the step's start.
+class _Lod(eqx.Module):
+    """The level-of-detail stage's result: who is in view, and the levels' buckets."""
 
-    ``pool``: source agents waiting for slots (:mod:`jcrowd.crowd.pool`); those due appear
-    before the frame is made.
+    visible: Array
+    buckets: Buckets
 
-    ``gather`` and ``ids``: on one device of several, how the dynamics see the whole crowd
-    (:func:`jcrowd.crowd.steering.steer`); unused without ``config.avoid``. ``scene``: the
-    layout's navigation fields and walls (:mod:`jcrowd.crowd.scene`; with ``config.avoid``).
-    """
+
+def _level_of_detail(
+    cm: CrowdModel, config: StepConfig, state: CrowdState, view: CameraView
+) -> _Lod:
+    """Stage 1: frustum and detail culling, each agent's level by distance (with hysteresis),
+    and the buckets of the levels' static capacities filled by importance."""
     nlev = len(cm.decoders.levels)
-    dt = jnp.asarray(dt, jnp.float32)
-    if pool is not None:
-        state = spawn_due(state, pool.reservoir, pool.times, pool.first_id, pool.budget)
     centre = (state.x, 0.55 * state.height, state.z)
     visible = state.alive & in_frustum(view, centre, radius=0.6 * 1.9)
     dist = jnp.sqrt(sum((c - view.eye[k]) ** 2 for k, c in enumerate(centre)))
@@ -275,49 +253,28 @@ def step(
     pixels = screen_height_px(view, centre, state.height)
     importance = -dist if config.importance == "distance" else pixels
     detailed = visible & (pixels >= config.min_pixels)
-    buckets = assign_buckets(min_level, importance, detailed, config.capacities)
+    return _Lod(visible, assign_buckets(min_level, importance, detailed, config.capacities))
 
-    # The dynamics first: the phase follows this step's walk (the root moves by v·dt below).
-    alive = state.alive
-    crowding = jnp.zeros((), jnp.int32)
-    if config.avoid:
-        grid = cast(GridSpec, config.grid)  # StepConfig.check requires it with avoid
-        tx, tz = waypoint_xz(state.waypoints, state.waypoint)
-        due, elapsed = None, dt
-        if config.far_every > 1:  # simulation LOD: far agents in turn
-            n = state.x.shape[0]
-            near_slots = sum(config.capacities[: config.blend_max_level + 1])
-            size = min(n, -(-n // config.far_every) + near_slots)
-            drawn_near = buckets.level <= config.blend_max_level
-            due = due_rows(drawn_near, state.clock, dt, config.far_every, size)
-            elapsed = jnp.where(drawn_near, dt, dt * config.far_every)  # since the last update
-        vx, vz, crowding = steer(
-            grid,
-            state.x,
-            state.z,
-            tx,
-            tz,
-            state.speed,
-            state.radius,
-            alive,
-            gather,
-            ids,
-            scene,
-            None if scene is None else current_field(state),
-            due,
-            (state.vx, state.vz),
-            config.anticipate,
-            elapsed,
-            config.avoidance_params(),
-        )
-        # The decode reads the velocity the root walks this step (follow_phase).
-        state = eqx.tree_at(lambda s: (s.vx, s.vz), state, (vx, vz))
 
+class _Blending(eqx.Module):
+    """The level-blending stage's result (:mod:`jcrowd.crowd.level_blend`)."""
+
+    rows: BlendRows
+    source: Array
+    left: Array
+    unblended: Array
+
+
+def _blending(
+    cm: CrowdModel, config: StepConfig, state: CrowdState, buckets: Buckets, dt: Array
+) -> _Blending:
+    """Stage 3: the agents whose level changed lately, decoded at the level they come from."""
+    nlev = len(cm.decoders.levels)
     source, left = blend_plan(
         state.shown, state.blend_from, state.blend_left, buckets.level, state.alive, nlev
     )
 
-    def old_pose(a: int, ids: Array, used: Array, state: CrowdState = state) -> Array:
+    def old_pose(a: int, ids: Array, used: Array) -> Array:
         near = a <= config.blend_max_level
         safe = jnp.where(ids < state.num_agents, ids, 0)
 
@@ -327,8 +284,23 @@ def step(
         chunk = bucket_chunk(ids.shape[0], config.chunk, cm.decoders.levels[a].cores.shape[1])
         return decode_bucket(jax.vmap(one), safe, used, chunk)
 
-    blend, unblended = blend_sources(buckets.slots, source, left, old_pose)
+    rows, unblended = blend_sources(buckets.slots, source, left, old_pose)
+    return _Blending(rows, source, left, unblended)
 
+
+def _synthesis(
+    cm: CrowdModel,
+    config: StepConfig,
+    state: CrowdState,
+    buckets: Buckets,
+    blend: BlendRows,
+    dt: Array,
+) -> tuple[CrowdState, list[Array], tuple[Array, Array, Array, Array]]:
+    """Stage 4: per level, decode + forward kinematics of its bucket (eased from the old level
+    where one is blending); every agent's root motion ``(dτ, dyaw, dx, dz)``, by dead
+    reckoning for those not synthesized. Returns the state (far cores refreshed), each
+    level's points and the root motion."""
+    nlev = len(cm.decoders.levels)
     dtau, dyaw, dx, dz = _dead_reckoning(cm, state, dt, config.avoid)
     points = []
     for lv, (slots, ok) in enumerate(zip(buckets.slots, buckets.valid, strict=True)):
@@ -357,32 +329,86 @@ def step(
         dyaw = dyaw.at[slots].set(yaw_l, mode="drop")
         dx = dx.at[slots].set(pos_l[:, 0], mode="drop")
         dz = dz.at[slots].set(pos_l[:, 1], mode="drop")
+    return state, points, (dtau, dyaw, dx, dz)
 
+
+def _move_roots(
+    cm: CrowdModel,
+    config: StepConfig,
+    state: CrowdState,
+    alive: Array,
+    motion: tuple[Array, Array, Array, Array],
+    dt: Array,
+) -> CrowdState:
+    """Stage 5: the roots of the agents alive at the step's start move — by ``v·dt`` with the
+    dynamics (the heading turning towards the velocity; a standing agent keeps it), else by
+    the decoded or dead-reckoned motion — and the phase advances."""
+    dtau, dyaw, dx, dz = motion
+    vx, vz = state.vx, state.vz  # the dynamics' output; without them it stays as it was
     if config.avoid:
         dx, dz = vx * dt, vz * dt
-        # A standing agent (slower than STAND_BELOW) keeps its heading: its feet stay put.
         heading = turn_towards(state.heading, vx, vz, dt, min_speed=STAND_BELOW)
-    else:  # the velocity is the dynamics' output; without them it stays as it was
-        vx, vz = state.vx, state.vz
+    else:
         heading = state.heading + dyaw
     moved = (
         jnp.where(alive, state.x + dx, state.x),
         jnp.where(alive, state.z + dz, state.z),
         jnp.where(alive, heading, state.heading),
         jnp.where(alive, state.tau + dtau, state.tau),
-        vx,
-        vz,
     )
-    slow = jnp.hypot(vx, vz) < STAND_BELOW  # the speed the phase followed
-    state = eqx.tree_at(lambda s: (s.x, s.z, s.heading, s.tau, s.vx, s.vz), state, moved)
+    state = eqx.tree_at(lambda s: (s.x, s.z, s.heading, s.tau), state, moved)
     if config.avoid:  # (without the dynamics nobody stands: ``stands`` stays False)
+        slow = jnp.hypot(vx, vz) < STAND_BELOW  # the speed the phase followed
         stands = alive & slow & stands_at(cm, state.tau)
         state = eqx.tree_at(lambda s: s.stands, state, stands)
-    state, deferred = schedule(cm, config, state, buckets.level < nlev, scene)
+    return state
+
+
+def step(
+    cm: CrowdModel,
+    config: StepConfig,
+    state: CrowdState,
+    view: CameraView,
+    dt: Array,
+    gather: Callable[[Array], Array] | None = None,
+    ids: Array | None = None,
+    world: World | None = None,
+    pool: Pool | None = None,
+) -> tuple[CrowdState, Frame]:
+    """Advance the crowd by ``dt`` seconds and return the frame at the step's start.
+
+    The stages, in order: sources (``pool``: agents waiting for slots, those due appear),
+    level of detail, dynamics (with ``config.avoid``), level blending, synthesis, root motion,
+    clip scheduling, and the frame.
+
+    ``gather`` and ``ids``: on one device of several, how the dynamics see the whole crowd
+    (:func:`~jcrowd.pedestrians.step.pedestrian_step`); unused without ``config.avoid``.
+    ``world``: the layout's navigation fields and walls (:mod:`jcrowd.pedestrians.scene`;
+    ``None``: no layout).
+    """
+    nlev = len(cm.decoders.levels)
+    dt = jnp.asarray(dt, jnp.float32)
+    if pool is not None:
+        state = spawn_due(state, pool.reservoir, pool.times, pool.first_id, pool.budget)
+    lod = _level_of_detail(cm, config, state, view)
+    buckets = lod.buckets
+    alive = state.alive
+    crowding = jnp.zeros((), jnp.int32)
+    if config.avoid:  # first: the phase follows this step's walk (the root moves by v·dt)
+        near = buckets.level <= config.blend_max_level
+        vx, vz, crowding = walk(config, world, state, near, dt, gather, ids)
+        state = eqx.tree_at(lambda s: (s.vx, s.vz), state, (vx, vz))
+    blending = _blending(cm, config, state, buckets, dt)
+    state, points, motion = _synthesis(cm, config, state, buckets, blending.rows, dt)
+    state = _move_roots(cm, config, state, alive, motion, dt)
+    state, deferred = schedule(cm, config, state, buckets.level < nlev, world)
     shown = jnp.where(alive, buckets.level, nlev)
-    blending = (shown, source, jnp.maximum(left - dt, 0.0))
-    state = eqx.tree_at(lambda s: (s.shown, s.blend_from, s.blend_left), state, blending)
-    state = eqx.tree_at(lambda s: s.level, state, buckets.level)
+    left = jnp.maximum(blending.left - dt, 0.0)
+    state = eqx.tree_at(
+        lambda s: (s.shown, s.blend_from, s.blend_left, s.level),
+        state,
+        (shown, blending.source, left, buckets.level),
+    )
     if pool is not None or config.far_every > 1:
         state = eqx.tree_at(lambda s: s.clock, state, state.clock + dt)
     frame = Frame(
@@ -390,10 +416,10 @@ def step(
         buckets.valid,
         tuple(points),
         buckets.level,
-        visible & (buckets.level == nlev),
+        lod.visible & (buckets.level == nlev),
         buckets.overflow + buckets.unplaced,
         deferred,
         crowding,
-        unblended,
+        blending.unblended,
     )
     return state, frame

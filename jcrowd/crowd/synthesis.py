@@ -37,7 +37,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from jcrowd.kriging.universal import KrigingModel, kriging_weights
+from jcrowd.kriging.model import KrigingModel
+from jcrowd.kriging.universal import kriging_weights
 from jcrowd.model.motion_model import MotionModel
 from jcrowd.motion.rotation import quat_from_expmap, quat_mul, quat_rotate, quat_to_matrix, yaw_quat
 from jcrowd.motion.skeleton import Skeleton, forward_kinematics, kept_ancestor_frame

@@ -63,7 +63,7 @@ def save_store(
     """Write ``tensors`` and JSON-serialisable ``meta`` to ``path`` atomically."""
     from safetensors.numpy import save
 
-    from jcrowd import __version__
+    from jcrowd.version import __version__
 
     arrays = {k: np.ascontiguousarray(v) for k, v in tensors.items()}
     for name, a in arrays.items():

@@ -34,6 +34,8 @@ from jcrowd.model.posevec import encode_sample as encode_sample
 from jcrowd.model.posevec import mean_rotations as mean_rotations
 from jcrowd.model.posevec import sample_at as sample_at
 from jcrowd.model.posevec import unwarp as unwarp
+from jcrowd.model.resynthesis import RECORD_KEYS as RECORD_KEYS
+from jcrowd.model.resynthesis import agent_motion as agent_motion
 from jcrowd.model.samples import CONTROL_NAMES as CONTROL_NAMES
 from jcrowd.model.samples import Sample as Sample
 from jcrowd.model.samples import gait_samples as gait_samples

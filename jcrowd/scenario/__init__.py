@@ -13,6 +13,10 @@ from jcrowd.scenario.geometry import polygon_contains as polygon_contains
 from jcrowd.scenario.geometry import polygon_problem as polygon_problem
 from jcrowd.scenario.geometry import sample_triangles as sample_triangles
 from jcrowd.scenario.geometry import triangulate as triangulate
+from jcrowd.scenario.keys import Varied as Varied
+from jcrowd.scenario.keys import parse_key_path as parse_key_path
+from jcrowd.scenario.keys import varied_parameter as varied_parameter
+from jcrowd.scenario.keys import with_values as with_values
 from jcrowd.scenario.layout import MAX_SPAWN_DENSITY as MAX_SPAWN_DENSITY
 from jcrowd.scenario.layout import Layout as Layout
 from jcrowd.scenario.layout import Wall as Wall

@@ -240,12 +240,12 @@ class DynamicsSettings:
     speed model drives every root; off: each walks its clips towards its waypoints as if alone).
     ``model``: ``"collision-free-speed"`` (the plain model, validated on unidirectional flows) or
     ``"anticipation"`` (people predict each other's paths a second ahead and step aside early:
-    counter-flows pass; see :mod:`jcrowd.crowd.avoidance`). ``radius``: the body disc kept clear
-    around each agent (m, 0.1–0.4). ``far_every``: agents drawn coarser than the blended near
+    counter-flows pass; see :mod:`jcrowd.pedestrians.reaction`). ``radius``: the body disc kept
+    clear around each agent (m, 0.1–0.4). ``far_every``: agents drawn coarser than the blended near
     levels, or not drawn, compute their avoidance every ``far_every`` steps, in turn (1–8; 1: every
     agent every step). ``params``: a parameters file (``jcrowd calibrate --out``; its
-    ``[avoidance]`` table sets fields of :class:`~jcrowd.crowd.avoidance.AvoidanceParams`, the rest
-    keep their defaults; its ``[body] radius``, when it has one, is the ``radius`` unless this
+    ``[avoidance]`` table sets fields of :class:`~jcrowd.pedestrians.params.AvoidanceParams`, the
+    rest keep their defaults; its ``[body] radius``, when it has one, is the ``radius`` unless this
     table names one); ``avoidance`` holds what it set, as ``(name, value)`` pairs."""
 
     avoid: bool = False

@@ -1,79 +1,39 @@
-"""Differentiable rollouts of the pedestrian dynamics and smooth surrogates of what they yield.
+"""Differentiable rollouts of the pedestrian model and smooth surrogates of what they yield.
 
-Issue 22, item 1: a function from the dynamics' continuous parameters — the avoidance model's
-(:class:`~jcrowd.crowd.avoidance.AvoidanceParams`), every agent's desired speed, the wall and
-obstacle segments, door widths and a source's rate (:class:`RolloutParams`) — to a trajectory
-(:func:`rollout`), which ``jax.grad`` differentiates. It steps :func:`~jcrowd.crowd.dynamics.
-pedestrian_step` itself (navigation → neighbours → avoidance → Euler step → exits), so the
-rollout is the simulator's dynamics, not a copy of them; the LOD and the clips are not in it.
+:func:`rollout` maps the model's continuous parameters — the avoidance model's
+(:class:`~jcrowd.pedestrians.params.AvoidanceParams`), every agent's desired speed, the wall
+and obstacle segments, door widths and a source's rate (:class:`RolloutParams`) — to a
+trajectory that ``jax.grad`` differentiates. It steps
+:func:`~jcrowd.pedestrians.step.pedestrian_step` itself, so the rollout is the simulator's
+dynamics, not a copy of them; levels of detail and clips are not in it.
 
 Readings taken:
 
-- **Hard structure fixed by the forward pass.** What the step decides with integers or booleans
-  — the neighbour grid's cells and candidate lists, which neighbour or wall is the nearest ahead
-  in the corridor of Eq. (3), the wall the desire slides along, the clips, and the removal of
-  agents that reached their target (``alive``) — carries no gradient: ``jax.grad`` gives the
-  derivative of the smooth piece of the dynamics the forward run lies on. That is the true
-  derivative almost everywhere; central differences disagree only when their step straddles a
-  switch (a neighbour entering the corridor ahead, an arrival one step earlier). A soft "alive"
-  weight was the alternative: it would change the model itself (the grid stores alive agents
-  only and Eq. (3) takes a hard minimum), so the rollout would no longer be the simulator's.
-  An agent that arrived stays frozen where it arrived; put exit lines for the surrogates
-  upstream of the targets (a metre is plenty) so the removal never reaches them.
-- **Geometry.** Gradients with respect to walls (and obstacles, whose boundaries are walls too)
-  flow through the wall terms of the avoidance model: the repulsion and the slide of Eq. (4)
-  and the spacing to a wall ahead in Eq. (3). The navigation fields are not differentiable in
-  the geometry: fast marching runs on the host, once (:mod:`jcrowd.crowd.navigation`), so a
-  moved wall does not re-route anybody, and the candidate walls per cell are the host's lists
-  (:func:`every_wall` makes every wall a candidate of every cell, for geometry moved farther
-  than ``WALL_REACH_M`` from the built one). Something better, not done here: the field's
-  derivative by the adjoint of the eikonal equation (its linearisation is a transport equation
-  along the characteristics, solvable in the fast-marching order on the host, one sweep per
-  parameter direction).
-- **Door widths.** A :class:`Door` names the wall vertices on either side of an opening;
-  :func:`door_walls` moves the two sides apart symmetrically along the opening's axis so the
-  opening is the given width about its current centre (a corridor behind the door widens with
-  it when its side walls' vertices are named too).
-- **Source rate.** Agents of a source wait at their own start positions (a queue behind a gate,
-  as in the HERMES runs' entrance) and agent ``i`` of rank ``q_i`` is let go at
-  ``t_i = q_i / rate``. Its desired speed is weighted by the soft entry
-  ``e_i(t) = σ((t − t_i)/τ_e)``, ``τ_e = 0.15`` s by default: the 12–88 % rise (±2τ_e) takes
-  0.6 s, about the 0.5 s relaxation time of social-force models, and spans 18 steps at 30 /s,
-  so the time grid resolves it. Waiting agents are in the scene (they are neighbours, standing);
-  a hard "appear at t_i" would be a jump in the rate. Ranks below zero enter before the start.
+- **Hard structure is fixed by the forward pass.** The neighbour grid, which neighbour or wall
+  is nearest ahead (Eq. 3), the wall the desire slides along and the removal of arrived agents
+  carry no gradient: ``jax.grad`` is the derivative of the smooth piece the forward run lies on,
+  the true derivative almost everywhere. A soft "alive" weight would change the model itself.
+  Put the surrogates' exit lines upstream of the targets so removal never reaches them.
+- **Geometry.** Gradients reach walls and obstacles through the wall terms of Eqs. (3)–(4); the
+  navigation fields are built on the host and do not move with them (:func:`every_wall` makes
+  every wall a candidate of every cell for geometry moved far from the built one).
+- **Doors and sources.** :func:`~jcrowd.rollouts.doors.door_walls` opens a :class:`Door` to a
+  width about its centre. A source's agent of rank ``q_i`` leaves its start at ``t_i = q_i /
+  rate``, its desired speed weighted by ``e_i(t) = σ((t − t_i)/τ_e)``, ``τ_e`` = 0.15 s (a
+  0.6 s rise, about a social-force model's relaxation time).
+- **Limits.** Where people press into each other (a jam before a door) the pathwise derivative
+  grows about ×1.4 per step; below capacity it grows about linearly and equals central
+  differences (``tests/test_grad_dynamics.py``). For a jam, differentiate short horizons.
+- **Memory.** Blocks of ``⌈√steps⌉`` steps under ``jax.checkpoint``, each step inside too: the
+  backward pass keeps ``steps/block + block`` states of about 30 B per agent, for two extra
+  forward passes (``bench/grad_memory.py``).
 
-Limits, measured: where people press into each other — a jam before a door — the pathwise
-derivative grows exponentially with the horizon, because the collision-free speed model's
-direction ``u(e⁰ + Σ repulsion)`` turns fast where the desire and the repulsion nearly cancel.
-1,000 agents pressing into a 3 m door: ``|∂x/∂θ|`` about 10 after 100 steps, 10¹⁵ after 200
-(×1.4 per step; at that rate float32 overflows some 160 steps later). Eight agents pressing
-into a 1 m door: from 1 to 10³ in 20 steps, and central differences stop converging as ``h``
-shrinks. Softer walls (``D_w = 0.1`` m) changed neither. Where the flow stays below capacity
-the derivative grows about linearly in time (``bench/grad_memory.py``'s corridor, 600 steps)
-and equals central differences to 4 digits (``tests/test_grad_dynamics.py``'s room). For a
-jam, differentiate short horizons or quantities averaged over many runs.
-
-Memory: the steps run in a ``lax.scan`` over blocks of ``block`` steps (default ``⌈√steps⌉``),
-each block under ``jax.checkpoint`` and each step inside it too. The backward pass keeps the
-state at every block's start and, while it works through one block, at every step of it, and
-the residuals of one step at a time: ``(steps/block + block)`` states of about 30 B per agent,
-plus the trajectory itself. It costs two extra forward passes. Measured (``bench/
-grad_memory.py``, XLA's buffer assignment, float32): 600 steps at 1,000 agents need 78 MB;
-blocks alone 1.15 GB (a step's residuals are ~45 MB there), no checkpoints 25.7 GB.
-
-Surrogates (each a smooth function of the trajectory; temperatures are arguments):
-
-- :func:`soft_exit_count`: agents past an exit line by time ``T``,
-  ``C(T) = Σ_i σ(((x_i(T) − p)·n) / τ_c)``, ``p`` a point of the line and ``n`` its unit normal
-  pointing out; ``τ_c = 0.1`` m (half a body radius: an agent counts 0.02 … 0.98 within ±0.4 m
-  of the line). In ``[0, N]``.
-- :func:`mean_travel_time`: ``(1/N) Σ_i Σ_{k<K} Δt e_i(t_k) (1 − σ(((x_i(t_k) − p)·n)/τ_c))``
-  with ``K = T/Δt``: the mean time from entering to passing the line, each agent's time
-  censored at ``T`` (one not through by ``T`` counts ``T − t_i``), by the rectangle rule on the
-  steps. Equal to the mean travel time when everyone is through by ``T``.
-
-Conventions: positions ``[x, z]`` in metres, time in seconds, ``Δt`` the step. Every floating
-array is computed at the precision of ``params.speed`` (the setup's are cast to it).
+Surrogates (temperatures are arguments): :func:`soft_exit_count`, agents past an exit line by
+time ``T``, ``Σ_i σ(((x_i(T) − p)·n)/τ_c)`` with ``τ_c`` = 0.1 m; :func:`mean_travel_time`,
+``(1/N) Σ_i Σ_{k<K} Δt e_i(t_k) (1 − σ(((x_i(t_k) − p)·n)/τ_c))``, each agent's time from
+entering to passing the line censored at ``T``. docs/design/rollouts.md has the measurements
+behind these readings. Positions ``[x, z]`` in metres, time in seconds; every floating array
+is computed at the precision of ``params.speed``.
 """
 
 from __future__ import annotations
@@ -88,22 +48,19 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.avoidance import AvoidanceParams
-from jcrowd.crowd.dynamics import Pedestrians, World, pedestrian_step
-from jcrowd.crowd.rollout_geometry import Door, door_walls, every_wall, find_door
 from jcrowd.errors import JcrowdError
+from jcrowd.pedestrians.params import AvoidanceParams
+from jcrowd.pedestrians.step import Pedestrians, pedestrian_step
+from jcrowd.pedestrians.world import World
+from jcrowd.rollouts.doors import Door, door_walls
 
 __all__ = [
     "COUNT_TEMPERATURE",
     "ENTRY_TEMPERATURE",
-    "Door",
     "RolloutParams",
     "RolloutSetup",
     "Trajectory",
-    "door_walls",
     "entry_weights",
-    "every_wall",
-    "find_door",
     "initial_params",
     "mean_travel_time",
     "rollout",
@@ -142,7 +99,7 @@ class RolloutSetup(eqx.Module):
     """What a rollout holds fixed: the scene, the start, the source's order and the time grid.
 
     Attributes:
-        world: the scene (:func:`~jcrowd.crowd.dynamics.build_world`); its walls are replaced
+        world: the scene (:func:`~jcrowd.pedestrians.world.build_world`); its walls are replaced
             by ``params.walls``.
         peds: the agents at ``t = 0``; their ``speed`` is replaced by ``params.speed``. With
             ``velocity`` the step relaxes over the reaction time (and anticipates with
@@ -160,7 +117,7 @@ class RolloutSetup(eqx.Module):
             ``k`` steps of the dynamics counts ``γ^k`` (truncated backpropagation through
             time; the forward pass is unchanged). 1: the exact gradient. Below 1 for jams,
             where the exact one grows about ×1.4 per step ("Limits"): a biased, bounded
-            gradient (:mod:`jcrowd.crowd.layout_opt` measures what it is worth).
+            gradient (:mod:`jcrowd.rollouts.layout_opt` measures what it is worth).
     """
 
     world: World
@@ -305,7 +262,7 @@ _fade.defvjp(_fade_fwd, _fade_bwd)
 
 def rollout(params: RolloutParams, setup: RolloutSetup) -> Trajectory:
     """Step the setup's agents ``setup.steps`` times with the dynamics of
-    :func:`~jcrowd.crowd.dynamics.pedestrian_step` under ``params``; differentiable in
+    :func:`~jcrowd.pedestrians.step.pedestrian_step` under ``params``; differentiable in
     ``params`` (module docstring: what carries no gradient, what the memory is).
 
     Not compiled here: ``jax.jit`` (or ``eqx.filter_jit``) the loss around it.

@@ -4,7 +4,7 @@
 ``[[obstacles]]`` table by its TOML key path: :func:`parse_key_path` reads the path,
 :func:`varied_parameter` checks it against the scenario and gives it bounds (default ±1 m for
 coordinates, ×0.5 … ×1.5 for sizes and radii), and :func:`with_values` writes new values back
-into the scenario, checked as a parsed scenario is. :mod:`jcrowd.crowd.layout_opt` optimises
+into the scenario, checked as a parsed scenario is. :mod:`jcrowd.rollouts.layout_opt` optimises
 them.
 """
 

@@ -2,74 +2,55 @@
 
 A. Tordeux, M. Chraibi, A. Seyfried, "Collision-free speed model for pedestrian dynamics",
 Traffic and Granular Flow '15 (Springer 2016), 225–232 (arXiv:1512.05597). A first-order model:
-each agent walks in a direction ``e_i`` at a speed set by the free space in front of it,
 
 - Eq. (1)  ``ẋ_i = V(s_i) e_i``;
-- Eq. (2)  ``V(s) = min(v0_i, max(0, (s − ℓ) / T))``, the optimal-velocity function with time
-  gap ``T`` and agent size ``ℓ``;
+- Eq. (2)  ``V(s) = min(v0_i, max(0, (s − ℓ) / T))``, time gap ``T``, agent size ``ℓ``;
 - Eq. (3)  ``s_i = min_{j ∈ J_i} ‖x_j − x_i‖`` over the neighbours ahead of ``i`` in a corridor
   of its own width: ``J_i = {j : e_i·(x_j − x_i) ≥ 0 and |e_i^⊥·(x_j − x_i)| ≤ ℓ}``;
-- Eq. (4)  ``e_i = u(e_i^0 + Σ_j R(‖x_i − x_j‖) (x_i − x_j)/‖x_i − x_j‖)`` with the
-  exponential repulsion ``R(s) = a exp((ℓ − s)/D)`` and ``u(v) = v/‖v‖``.
+- Eq. (4)  ``e_i = u(e_i^0 + Σ_j R(‖x_i − x_j‖) (x_i − x_j)/‖x_i − x_j‖)``,
+  ``R(s) = a exp((ℓ − s)/D)``, ``u(v) = v/‖v‖``.
 
-Readings taken where the paper leaves a choice, as JuPedSim's implementation of the model does:
-agents have radii and the size of a pair is ``ℓ_ij = r_i + r_j`` (the paper's one ``ℓ`` is the
-case of equal radii); walls repel in Eq. (4) like a neighbour, ``a_w exp((r_i − d)/D_w)`` along
-the normal from the wall's closest point at distance ``d``. ``a = 8``, ``D = 0.1`` m,
-``a_w = 5``, ``D_w = 0.02`` m are JuPedSim 1.4's defaults.
+Readings taken as JuPedSim's implementation does: radii, ``ℓ_ij = r_i + r_j``; walls repel in
+Eq. (4) like a neighbour, ``a_w exp((r_i − d)/D_w)`` along the normal from the wall's closest
+point. Four changes of ours, each for a failure of the paper's model on the experiments of
+``bench/pedestrians.py`` (docs/validation.md has today's figures, docs/design/pedestrians.md
+the measurements behind each):
 
-Four changes of ours, each measured on the HERMES corridor runs and the bottlenecks of
-``bench/pedestrians.py`` (docs/crowd.md has the tables):
+- **A smooth Eq. (2)**: ``V(s) = v0 x / (1 + x^n)^{1/n}``, ``x = (s − ℓ)/(v0 T)``, ``n`` = 4:
+  the same slope ``1/T`` at contact and free speed, never above the paper's ``V`` (the
+  collision-free bound holds), the paper's as ``n → ∞``. The paper's triangular
+  speed–density relation leaves the fed HERMES corridors far too thin and fast. Differentiable.
+- **Anisotropic repulsion**: ``j`` repels ``i`` with weight ``λ + (1 − λ)(1 + cos φ_ij)/2``,
+  ``φ_ij`` between ``e_i^0`` and ``x_j − x_i`` (social-force models' anisotropy), ``λ`` = 0.3:
+  isotropic, a crowd pressing from behind forms arches at a narrow exit that never break.
+- **Walls in Eq. (3)**: a wall segment ahead, within ``r_i`` of the walking line, limits the
+  speed like a neighbour of size 0 at its closest point, so an agent walking into a door's
+  corner stops instead of oscillating against ``D_w``'s stiff repulsion.
+- **Sliding along walls**: ``e^0 ← u(e^0 − w min(0, e^0·n) n)``, ``n`` the normal of the wall
+  pressed into most, ``w = clip((r_i + m − d)/m, 0, 1)``, ``m`` = 0.1 m: a navigation path is a
+  point's, and beside a corner it points into the wall for a body of radius ``r``.
 
-- **A smooth Eq. (2)**: ``V(s) = v0 x / (1 + x^n)^{1/n}`` with ``x = (s − ℓ)/(v0 T)``: the same
-  slope ``1/T`` at contact and the same free speed, never above the paper's ``min(v0, (s−ℓ)/T)``
-  (so the collision-free bound holds), the paper's as ``n → ∞``. With the paper's ``V`` the
-  speed–density relation is triangular: people walk at full speed until the space in front runs
-  out, and the corridor runs fed at the measured 2.4–2.9 /s came out 38–46 % too thin at speeds
-  of 1.25 m/s where people walked 0.67–0.96 m/s. ``n = 4`` and ``T = 0.6`` s (a sweep of
-  ``n`` 2–∞, ``T`` 0.35–1 s on the six runs) bring every run's density within ±20 % with a speed
-  error of 0.14 m/s; ``T = 1`` s (the paper's, JuPedSim's) gives 0.13 m/s but densities −46 %.
-  It is also differentiable everywhere, which a later issue needs.
-- **Anisotropic repulsion**: neighbour ``j`` repels ``i`` with the weight
-  ``λ + (1 − λ)(1 + cos φ_ij)/2``, ``φ_ij`` the angle between ``e_i^0`` and ``x_j − x_i`` — the
-  anisotropy of social-force models (Helbing et al.; people react less to those behind them),
-  ``λ = 0.3``. Isotropic, the crowd pressing from behind turned the front agents of a 0.7 m exit
-  into the wall and into each other, and arches formed that never broke (45–75 of ~150 agents
-  left in uo-180-180-070 at 3× the measured time, depending on ``T``); at ``λ = 0.3`` none.
-- **Walls in Eq. (3)**: a wall segment ahead limits the speed like a neighbour of size 0 at its
-  closest point (ahead: ``e_i·(q − x_i) ≥ 0``, within ``r_i`` of the walking line; spacing
-  ``d − r_i``). With walls only in Eq. (4), an agent walking into a door's corner bounced
-  between ``D_w``'s stiff repulsion and its desire, 2–3 agents oscillating in place there.
-- **Sliding along walls**: the desired direction loses the part that presses into the wall it
-  presses into most, ``e^0 ← u(e^0 − w min(0, e^0·n) n)``, ``n`` the wall's unit normal towards
-  the agent and ``w = clip((r_i + m − d)/m, 0, 1)`` (``m = 0.1`` m): the navigation field's path
-  is a point's, and beside a door's corner it points into the wall for a body of radius ``r``.
+The reaction time and anticipation, given the last velocities, are :mod:`~jcrowd.pedestrians.
+reaction`. Smoothness: Eq. (4) and ``V`` are smooth; the spacing is a minimum over a set the
+direction decides and the slide picks one wall, so the gradient jumps where those change.
 
-A fifth, the reaction time (given the last velocities), and the anticipation model are in
-:mod:`jcrowd.crowd.reaction`.
-
-Smoothness: the direction (Eq. 4) and ``V`` are smooth in positions and parameters; the spacing
-is a minimum over a set decided by the direction (Eq. 3) and the slide picks one wall, so the
-gradient jumps where the nearest neighbour ahead or the wall pressed into most changes.
-
-Conventions: positions ``[x, z]`` in metres, velocities m/s. Neighbours are given as candidate
-ids (:func:`jcrowd.crowd.neighbours.candidates`, ``N`` for none) and walls as segments
-``(S, 2, 2)`` with per-agent candidate segment ids (``S`` for none). The step evaluates the
-model through the neighbour grid with :func:`jcrowd.crowd.grid_avoidance.avoid_in_grid`.
+Conventions: positions ``[x, z]`` in metres, velocities m/s. Neighbours come as candidate ids
+(``N`` for none), walls as segments ``(S, 2, 2)`` with per-agent candidate ids (``S`` for
+none); the step evaluates the model through the grid with
+:func:`~jcrowd.pedestrians.grid_avoidance.avoid_in_grid`.
 """
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.reaction import TINY as _TINY
-from jcrowd.crowd.reaction import Motion, react, relax_velocity, sideways
-from jcrowd.crowd.reaction import unit_xz as _unit_xz
+from jcrowd.pedestrians.params import AvoidanceParams
+from jcrowd.pedestrians.reaction import TINY as _TINY
+from jcrowd.pedestrians.reaction import Motion, react, relax_velocity, sideways
+from jcrowd.pedestrians.reaction import unit_xz as _unit_xz
 
 __all__ = [
-    "AvoidanceParams",
     "Motion",
     "approach_cap",
     "avoid",
@@ -78,44 +59,6 @@ __all__ = [
     "closest_on_segments",
     "crowd_table",
 ]
-
-
-class AvoidanceParams(eqx.Module):
-    """The avoidance models' parameters (traced: changing them never recompiles).
-
-    Attributes:
-        strength: ``a`` of the neighbour repulsion (dimensionless).
-        range: ``D`` of the neighbour repulsion (m).
-        wall_strength: ``a_w`` of the wall repulsion.
-        wall_range: ``D_w`` of the wall repulsion (m).
-        time_gap: ``T`` (s).
-        sharpness: ``n`` of the smooth ``V`` (module docstring).
-        anisotropy: ``λ``, the weight of a neighbour straight behind in Eq. (4).
-        wall_slide: ``m`` (m), how far from contact the desire starts sliding along a wall.
-        anticipation_time: ``t_a`` (s), how far ahead neighbours' paths are predicted.
-        anticipation_strength, anticipation_range: ``a_a``, ``D_a`` (m) of the sideways step.
-        reaction_time: ``τ`` (s) over which the anticipating direction follows.
-        plain_reaction_time: the same for the plain model, given the last velocities (the
-            fifth change, :mod:`jcrowd.crowd.reaction`).
-        keep_right: ``b`` (m), the tie-break of an exact head-on meeting.
-        side_width: ``w`` (m).
-    """
-
-    strength: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.0)
-    range: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
-    wall_strength: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=5.0)
-    wall_range: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.02)
-    time_gap: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.6)
-    sharpness: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=4.0)
-    anticipation_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1.0)
-    anticipation_strength: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.0)
-    anticipation_range: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
-    reaction_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.3)
-    keep_right: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.05)
-    side_width: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
-    wall_slide: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
-    anisotropy: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.3)
-    plain_reaction_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
 
 
 def closest_on_segments(
@@ -215,7 +158,7 @@ def avoid(
     horizon: Float[Array, "*N"] | None = None,
 ) -> tuple[Float[Array, "N 2"], Float[Array, " N"]]:
     """Every agent's velocity (Eqs. 1–4) from its candidate neighbours and walls; with
-    ``motion``, anticipating (:mod:`jcrowd.crowd.reaction`'s reading of Xu et al. 2021).
+    ``motion``, anticipating (:mod:`jcrowd.pedestrians.reaction`'s reading of Xu et al. 2021).
 
     ``neighbours`` holds agent ids (``N`` for none), ``wall_ids`` segment ids into ``walls``
     (``S`` for none). With ``others = (positions (P, 2), radii (P,))`` the ids index those

@@ -1,12 +1,12 @@
 """The avoidance model evaluated through the neighbour grid, reading only as many candidates as
 each agent has (:func:`avoid_in_grid`).
 
-:func:`jcrowd.crowd.avoidance.avoid` takes a fixed number of candidate ids per agent. In a crowd
-most agents have few neighbours and a few have many, so the step reads candidates in tiers
+:func:`jcrowd.pedestrians.avoidance.avoid` takes a fixed number of candidate ids per agent. In a
+crowd most agents have few neighbours and a few have many, so the step reads candidates in tiers
 (:data:`CANDIDATE_TIERS`): everyone with the first tier's count, then only the agents that
 filled it with the next, in the smallest bucket of agents that holds them
 (:data:`BUCKET_DIVISORS`). The crowd is read in the grid's cell order
-(:class:`~jcrowd.crowd.neighbours.CellList`), so a candidate is one read.
+(:class:`~jcrowd.pedestrians.neighbours.CellList`), so a candidate is one read.
 """
 
 from __future__ import annotations
@@ -19,8 +19,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from jcrowd.crowd.avoidance import AvoidanceParams, Motion, avoid_rows, crowd_table
-from jcrowd.crowd.neighbours import CellList, GridSpec, near_places
+from jcrowd.pedestrians.avoidance import avoid_rows, crowd_table
+from jcrowd.pedestrians.neighbours import CellList, GridSpec, near_places
+from jcrowd.pedestrians.params import AvoidanceParams
+from jcrowd.pedestrians.reaction import Motion
 
 __all__ = ["BUCKET_DIVISORS", "CANDIDATE_TIERS", "avoid_in_grid"]
 
@@ -56,14 +58,14 @@ def avoid_in_grid(
 
     ``others = (positions (P, 2), radii (P,))`` is the crowd ``cells`` was filled from and
     ``rows`` the agents' own ids in it (they are not their own neighbours). The crowd is read
-    in cell order (:class:`~jcrowd.crowd.neighbours.CellList`), so a candidate is one read.
+    in cell order (:class:`~jcrowd.pedestrians.neighbours.CellList`), so a candidate is one read.
     Everyone is first evaluated with the first :data:`CANDIDATE_TIERS` ``[0]`` candidates; an
     agent with that many or more is evaluated again with the next tier's count (the last tier
     holds nine full cells), in the smallest bucket of :data:`BUCKET_DIVISORS` that holds all
     such agents, or all agents at that tier when none does (one branch runs). ``horizon``:
-    as :func:`~jcrowd.crowd.avoidance.avoid`'s (the speed cap of agents updated only every
+    as :func:`~jcrowd.pedestrians.avoidance.avoid`'s (the speed cap of agents updated only every
     few steps). Same
-    velocities as :func:`avoid` with :func:`~jcrowd.crowd.neighbours.candidates`, but for the
+    velocities as :func:`avoid` with :func:`~jcrowd.pedestrians.neighbours.candidates`, but for the
     order of the sums.
     """
     n = position.shape[0]
@@ -96,33 +98,49 @@ def avoid_in_grid(
         return v
 
     tiers = [k for k in CANDIDATE_TIERS if k < 9 * grid.capacity] + [9 * grid.capacity]
-    buckets = sorted({min(n, max(64, n // d)) for d in BUCKET_DIVISORS})
-    everyone = jnp.arange(n, dtype=jnp.int32)
     near, count = near_places(grid, cells, position, tiers[0], own)
-    velocity = velocities(everyone, near)
+    velocity = velocities(jnp.arange(n, dtype=jnp.int32), near)
     for below, k in itertools.pairwise(tiers):
         dense = alive & (count >= below)
-        n_dense = jnp.sum(dense, dtype=jnp.int32)
-
-        def keep(velocity: Array) -> Array:
-            return velocity
-
-        def in_bucket(velocity: Array, dense: Array = dense, k: int = k, *, b: int) -> Array:
-            (idx,) = jnp.nonzero(dense, size=b, fill_value=n)
-            safe = jnp.where(idx < n, idx, 0)
-            full, _ = near_places(grid, cells, position[safe], k, own[safe])
-            return velocity.at[idx].set(velocities(safe, full), mode="drop")
-
-        def all_agents(velocity: Array, k: int = k) -> Array:
-            full, _ = near_places(grid, cells, position, k, own)
-            return velocities(everyone, full)
-
-        branches: list[Callable[[Array], Array]] = [
-            keep,
-            *(partial(in_bucket, b=b) for b in buckets),
-            all_agents,
-        ]
-        larger = sum((n_dense > b).astype(jnp.int32) for b in buckets)
-        which = jnp.where(n_dense == 0, 0, 1 + larger)
-        velocity = jax.lax.switch(which, branches, velocity)
+        velocity = _next_tier(grid, cells, position, own, dense, k, velocities, velocity)
     return jnp.where(alive[:, None], velocity, 0.0)
+
+
+def _next_tier(
+    grid: GridSpec,
+    cells: CellList,
+    position: Array,
+    own: Array,
+    dense: Array,
+    k: int,
+    velocities: Callable[[Array, Array], Array],
+    velocity: Array,
+) -> Array:
+    """The velocities with the ``dense`` agents evaluated again with ``k`` candidates, in the
+    smallest bucket of :data:`BUCKET_DIVISORS` that holds them, else all agents (one branch
+    runs)."""
+    n = position.shape[0]
+    buckets = sorted({min(n, max(64, n // d)) for d in BUCKET_DIVISORS})
+    n_dense = jnp.sum(dense, dtype=jnp.int32)
+
+    def keep(velocity: Array) -> Array:
+        return velocity
+
+    def in_bucket(velocity: Array, *, b: int) -> Array:
+        (idx,) = jnp.nonzero(dense, size=b, fill_value=n)
+        safe = jnp.where(idx < n, idx, 0)
+        full, _ = near_places(grid, cells, position[safe], k, own[safe])
+        return velocity.at[idx].set(velocities(safe, full), mode="drop")
+
+    def all_agents(velocity: Array) -> Array:
+        full, _ = near_places(grid, cells, position, k, own)
+        return velocities(jnp.arange(n, dtype=jnp.int32), full)
+
+    branches: list[Callable[[Array], Array]] = [
+        keep,
+        *(partial(in_bucket, b=b) for b in buckets),
+        all_agents,
+    ]
+    larger = sum((n_dense > b).astype(jnp.int32) for b in buckets)
+    which = jnp.where(n_dense == 0, 0, 1 + larger)
+    return jax.lax.switch(which, branches, velocity)

@@ -1,50 +1,54 @@
-"""A scenario's layout as the arrays the crowd step reads: navigation fields and walls.
+"""A scenario's layout as a :class:`~jcrowd.pedestrians.world.World`: fields per waypoint, walls.
 
-With obstacles, walls or a walkable area (:mod:`jcrowd.scenario.layout`) an agent no longer
-walks straight at its waypoint: it walks down a distance field (:mod:`jcrowd.crowd.navigation`)
-to the waypoint's *target*, and the collision-free speed model keeps it off the walls
-(:mod:`jcrowd.crowd.avoidance`, Eq. 4's wall term). :func:`build_scene` runs once, on the host,
-when a scenario is prepared:
+With obstacles, walls or a walkable area (:mod:`jcrowd.scenario.layout`) an agent walks down a
+distance field (:mod:`jcrowd.pedestrians.navigation`) to its waypoint's *target*, and the
+collision-free speed model keeps it off the walls (:mod:`jcrowd.pedestrians.avoidance`, Eq. 4's
+wall term). :func:`build_scene` runs once, on the host, when a scenario is prepared:
 
 - Targets. A path waypoint's target is the disc of radius ``reach`` (the distance at which the
   step counts a waypoint as reached, :attr:`~jcrowd.crowd.state.StepConfig.reach`) round the
   group's waypoint, cut to the free space and to the piece of it that holds the waypoint (a
-  wall crossing the disc leaves its far side out). A goal's target is the goal region cut to the
-  free space. One field per group and waypoint; agents' own waypoints (offset sideways by up to
-  ``LATERAL_JITTER_M`` from the group's) share it.
+  wall crossing the disc leaves its far side out). A goal's target is the goal region cut to
+  the free space. One field per group and waypoint; agents' own waypoints (offset sideways by
+  up to ``LATERAL_JITTER_M`` from the group's) share it.
 - Inside its target (field ≤ 0) an agent heads straight at its own waypoint; outside, down the
-  field. A waypoint counts as reached on entering its target (a goal region is thus an exit:
-  agents leave as they step into it), so a waypoint behind a thin wall within ``reach`` is not
-  reached through the wall.
+  field. A waypoint counts as reached on entering its target (a goal region is thus an exit),
+  so a waypoint behind a thin wall within ``reach`` is not reached through the wall.
 - Walls: the free space's boundary segments; per neighbour-grid cell the segments within
-  :data:`~jcrowd.crowd.dynamics.WALL_REACH_M` of it (the standalone dynamics' table).
+  :data:`~jcrowd.pedestrians.world.WALL_REACH_M` of it.
 
 Memory: the fields are ``targets × cells × 4`` bytes over the free space's bounding box at
-:data:`NAV_CELL_M` cells (e.g. 6 targets over 100 m × 100 m: 6 × 250,000 × 4 = 6 MB). A layout
-whose fields would exceed :data:`MAX_FIELD_BYTES` is refused. Scenarios without a layout build
-no fields: ``city_100k.toml`` (no obstacles) walks straight at its waypoints as before.
+:data:`NAV_CELL_M` cells (6 targets over 100 m × 100 m: 6 MB). A layout whose fields would
+exceed :data:`MAX_FIELD_BYTES` is refused. A scenario without a layout builds no fields: its
+agents walk straight at their waypoints (:func:`~jcrowd.pedestrians.world.open_world`).
 """
 
 from __future__ import annotations
 
 from typing import cast
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import shapely
-from jaxtyping import Array, Float, Int
+from jaxtyping import Int
 
-from jcrowd.crowd.dynamics import wall_segments, walls_near_cells
-from jcrowd.crowd.navigation import Navigation, distance_field, field_grid, rasterize
-from jcrowd.crowd.neighbours import GridSpec
 from jcrowd.errors import JcrowdError, ScenarioError
+from jcrowd.pedestrians.navigation import Navigation, distance_field, field_grid, rasterize
+from jcrowd.pedestrians.neighbours import GridSpec
+from jcrowd.pedestrians.world import World, wall_segments, walls_near_cells
 from jcrowd.scenario.geometry import Region
 from jcrowd.scenario.layout import free_space, region_shape
 from jcrowd.scenario.schema import Scenario
 from jcrowd.scenario.spawning import Spawn
 
-__all__ = ["MAX_FIELD_BYTES", "NAV_CELL_M", "Scene", "build_scene", "field_ids", "scene_bytes"]
+__all__ = [
+    "CLEARANCE_M",
+    "MAX_FIELD_BYTES",
+    "NAV_CELL_M",
+    "build_scene",
+    "field_ids",
+    "scene_bytes",
+]
 
 NAV_CELL_M = 0.2
 """Navigation grid cell (m): under the 0.25 m the door widths of the shared experiments (0.5 m
@@ -55,21 +59,6 @@ MAX_FIELD_BYTES = 2 * 1024**3
 
 CLEARANCE_M = 0.5
 """Paths keep this far off walls where there is room (:func:`distance_field`)."""
-
-
-class Scene(eqx.Module):
-    """What the step reads of a layout.
-
-    Attributes:
-        nav: the distance fields, one per target.
-        walls: ``(S, 2, 2)`` wall segments ``[[x, z], [x, z]]``.
-        cell_walls: ``(cells, W)`` segment ids near each cell of the step's neighbour grid
-            (``S``: none).
-    """
-
-    nav: Navigation
-    walls: Float[Array, "S 2 2"]
-    cell_walls: Int[Array, "C W"]
 
 
 def _piece_holding(area: shapely.Geometry, point: shapely.Point) -> shapely.Geometry:
@@ -120,9 +109,10 @@ def field_ids(scenario: Scenario, sp: Spawn) -> Int[np.ndarray, "N K"]:
 
 def build_scene(
     scenario: Scenario, sp: Spawn, grid: GridSpec, reach: float
-) -> tuple[Scene, Int[np.ndarray, "N K"]]:
-    """The scene's arrays and each agent's field per waypoint ``(N, K)`` (padded like the
-    spawn's waypoints, with the last one).
+) -> tuple[World, Int[np.ndarray, "N K"]]:
+    """The layout as a :class:`~jcrowd.pedestrians.world.World` over the step's neighbour
+    ``grid``, and each agent's field per waypoint ``(N, K)`` (padded like the spawn's
+    waypoints, with the last one).
 
     Raises:
         ScenarioError: fields larger than :data:`MAX_FIELD_BYTES`, or a target the navigation
@@ -150,9 +140,10 @@ def build_scene(
                 raise ScenarioError(f"{scenario.source}: {key}: {err}") from None
     ids = field_ids(scenario, sp)
     walls = wall_segments(space)
-    scene = Scene(
+    world = World(
         Navigation(jnp.asarray(np.stack(fields)), fg),
         jnp.asarray(walls),
         jnp.asarray(walls_near_cells(grid, walls)),
+        grid,
     )
-    return scene, ids
+    return world, ids

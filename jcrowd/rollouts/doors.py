@@ -1,6 +1,6 @@
 """Geometry a rollout's parameters move: door openings and walls beyond the host's cell lists.
 
-Part of the differentiable rollouts (:mod:`jcrowd.crowd.rollout`, "Door widths" and
+Part of the differentiable rollouts (:mod:`jcrowd.rollouts.rollout`, "Door widths" and
 "Geometry"): a :class:`Door` names the wall vertices on either side of an opening (found on
 the host by :func:`find_door`), :func:`door_walls` opens it to a traced width, and
 :func:`every_wall` makes every wall a candidate of every neighbour cell, for walls moved
@@ -17,8 +17,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from jcrowd.crowd.dynamics import World
 from jcrowd.errors import JcrowdError
+from jcrowd.pedestrians.world import World
 
 __all__ = ["Door", "door_walls", "every_wall", "find_door"]
 
@@ -91,6 +91,6 @@ def door_walls(
 def every_wall(world: World) -> World:
     """``world`` with every wall a candidate of every cell (``(cells, S)`` ids): for walls
     moved beyond the host's per-cell lists (``WALL_REACH_M``); costs ``S`` walls per agent."""
-    s, cells = world.walls.shape[0], world.cell_walls.shape[0]
-    ids = jnp.broadcast_to(jnp.arange(s, dtype=world.cell_walls.dtype), (cells, max(s, 1)))
+    s, cells = world.walls.shape[0], world.grid.num_cells
+    ids = jnp.broadcast_to(jnp.arange(s, dtype=jnp.int32), (cells, max(s, 1)))
     return eqx.tree_at(lambda w: w.cell_walls, world, ids if s else jnp.zeros_like(ids))

@@ -1,8 +1,8 @@
-"""Windows of measured runs for the calibration (:mod:`jcrowd.crowd.calibrate`): the HERMES
+"""Windows of measured runs for the calibration (:mod:`jcrowd.rollouts.calibrate`): the HERMES
 corridor's geometry, and every few seconds of a run's steady state the measured people as a
 rollout's start, with where they were measured a horizon later.
 
-The module docstring of :mod:`jcrowd.crowd.calibrate` says why short windows from measured
+The module docstring of :mod:`jcrowd.rollouts.calibrate` says why short windows from measured
 states (and not free runs) and what is compared. Positions ``[x, y]`` of the recordings in
 metres (people walk towards −y), time in seconds, the step ``DT`` = 1/30 s.
 """
@@ -18,8 +18,8 @@ import shapely
 from jaxtyping import Array, Bool, Float
 from shapely.ops import nearest_points
 
-from jcrowd.crowd.dynamics import World, build_world
 from jcrowd.errors import JcrowdError
+from jcrowd.pedestrians.world import World, build_world
 
 __all__ = [
     "DT",
@@ -101,6 +101,38 @@ def _positions_at(rows: np.ndarray, frame: int) -> dict[int, np.ndarray]:
     return {int(r[0]): r[2:4] for r in sel}
 
 
+def _window_people(
+    rows: np.ndarray,
+    start: int,
+    vf: int,
+    h: int,
+    fps: float,
+    inner: shapely.Geometry,
+    box: tuple[float, float, float, float],
+) -> tuple[np.ndarray, ...]:
+    """The people present at frame ``start``: start positions (moved just inside the walls),
+    velocities over the ``vf`` frames before, measured positions ``h`` frames later (their
+    start where they vanish), whether each is counted (in the measurement area ``box`` and
+    still seen at the end) and the measured start positions."""
+    x0, x1, y0, y1 = box
+    now, before, later = (_positions_at(rows, f) for f in (start, start - vf, start + h))
+    ids = sorted(now)
+    p0 = np.array([now[i] for i in ids]).reshape(-1, 2)
+    v0 = np.array([(now[i] - before[i]) * fps / vf if i in before else (0, 0) for i in ids])
+    # A measured head can stand within a body radius of a wall; start it just inside.
+    for k, p in enumerate(p0):
+        point = shapely.Point(p)
+        if not inner.contains(point):
+            near = nearest_points(inner, point)[0]
+            p0[k] = (near.x, near.y)
+    end = np.array([later.get(i, now[i]) for i in ids]).reshape(-1, 2)
+    start_xy = np.array([now[i] for i in ids]).reshape(-1, 2)
+    inside = (start_xy[:, 0] >= x0) & (start_xy[:, 0] <= x1)
+    inside &= (start_xy[:, 1] >= y0) & (start_xy[:, 1] <= y1)
+    counted = inside & np.array([i in later for i in ids], bool)
+    return p0, v0.reshape(-1, 2), end, counted, start_xy
+
+
 def make_windows(
     rows: np.ndarray,
     fps: float,
@@ -141,27 +173,9 @@ def make_windows(
             f"calibrate: expected frames {frames} to hold a {horizon_s} s window after "
             f"{VELOCITY_S} s of history, found too few"
         )
-    area, target, (x0, x1, y0, y1) = corridor_scene(corridor_m, exit_m)
-    world = build_world(area, [target])
+    area, target, box = corridor_scene(corridor_m, exit_m)
     inner = area.buffer(-RADIUS - 0.02)
-    per: list[tuple[np.ndarray, ...]] = []
-    for s in starts:
-        now, before, later = (_positions_at(rows, int(f)) for f in (s, s - vf, s + h))
-        ids = sorted(now)
-        p0 = np.array([now[i] for i in ids]).reshape(-1, 2)
-        v0 = np.array([(now[i] - before[i]) * fps / vf if i in before else (0, 0) for i in ids])
-        # A measured head can stand within a body radius of a wall; start it just inside.
-        for k, p in enumerate(p0):
-            point = shapely.Point(p)
-            if not inner.contains(point):
-                near = nearest_points(inner, point)[0]
-                p0[k] = (near.x, near.y)
-        end = np.array([later.get(i, now[i]) for i in ids]).reshape(-1, 2)
-        start_xy = np.array([now[i] for i in ids]).reshape(-1, 2)
-        inside = (start_xy[:, 0] >= x0) & (start_xy[:, 0] <= x1)
-        inside &= (start_xy[:, 1] >= y0) & (start_xy[:, 1] <= y1)
-        counted = inside & np.array([i in later for i in ids], bool)
-        per.append((p0, v0.reshape(-1, 2), end, counted, start_xy))
+    per = [_window_people(rows, int(s), vf, h, fps, inner, box) for s in starts]
     most = max(len(p[0]) for p in per)
     n = agents or int(8 * np.ceil((most + 1) / 8))
     if most >= n:
@@ -178,6 +192,7 @@ def make_windows(
         pos[k, :m], vel[k, :m], alive[k, :m], counted[k, :m] = p0, v0, True, c
         # The residual compares displacements from where the person was measured.
         end[k, :m] = e - sxy + p0
+    world = build_world(area, [target])
     f32 = jnp.float32
     batch = WindowBatch(
         world,

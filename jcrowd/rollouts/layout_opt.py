@@ -1,60 +1,34 @@
-"""Layout optimisation: move obstacles so a scenario's room empties fastest (issue 22, item 3).
+"""Layout optimisation: move obstacles so a scenario's room empties fastest.
 
 A scenario's geometry is parametrised by the numbers at a few TOML key paths of its
-``[[obstacles]]`` (``obstacles[2].center[0]``: the x of the third obstacle's centre; also
-``size[k]``, ``radius``, ``points[j][k]``), each within bounds. :func:`layout_problem` fixes
-everything else (the agents as spawned from the scenario as written, the time grid, the
-avoidance model), :func:`layout_setup` builds the world at one parameter vector ``θ`` on the
-host, :func:`layout_objective` runs the rollout (:func:`~jcrowd.crowd.rollout.rollout`) and reads
-the objective, and :func:`projected_gradient` minimises it within the bounds.
+``[[obstacles]]`` (``obstacles[2].center[0]``, ``size[k]``, ``radius``, ``points[j][k]``;
+:mod:`jcrowd.scenario.keys`), each within bounds. :func:`layout_problem` fixes everything
+else, :func:`layout_setup` builds the world at one parameter vector ``θ`` on the host,
+:func:`layout_objective` runs the rollout and reads the objective, and
+:func:`~jcrowd.rollouts.search.projected_gradient` minimises it within the bounds.
 
 Readings taken:
 
-- **The navigation field is rebuilt at every outer iterate and frozen inside the gradient.**
-  Fast marching runs on the host (:mod:`jcrowd.crowd.navigation`), so ``θ`` changes the free
-  space, the fields and the per-cell wall lists between iterates, and ``jax.grad`` gives the
-  derivative with the field held at the current iterate: through the walls' repulsion, the slide
-  along them and the spacing ahead (:mod:`jcrowd.crowd.rollout`, "Geometry"), not through people
-  re-routing. The forward objective that a grid search evaluates, :func:`forward_value`,
-  rebuilds the field at each ``θ`` too; it is what the optimiser's line search compares, so an
-  accepted step lowers the true objective even where the frozen-field gradient is off. The
-  field is rasterised at 0.2 m cells: as ``θ`` moves, the field changes in small jumps when an
-  obstacle's edge crosses a cell centre, so the forward objective is piecewise smooth with
-  small steps (measured in ``bench/optimize.py``).
-- **Obstacle walls as functions of ``θ``.** The walls the rollout reads are the free space's
-  boundary *without* the varied obstacles (built once) plus each varied obstacle's own outline
-  (a rectangle's 4 sides, a circle's 64-gon as :func:`~jcrowd.scenario.layout.region_shape`
-  draws it, a polygon's edges), computed in JAX from ``θ`` so ``jax.grad`` reaches them. Where
-  a varied obstacle overlaps another, both outlines stay walls (nobody can stand inside them).
-  The per-cell wall lists are padded to a power of two so moving an obstacle seldom recompiles.
-- **Agents.** Spawned once from the scenario as written (its seed); every ``θ`` starts from the
-  same crowd, so differences between layouts are not differences between draws. An agent
-  inside a varied obstacle at some ``θ`` is an error naming the key to bound tighter. Only
-  groups with a ``goal`` (walk there and leave) and no ``[[sources]]``.
-- **Objectives** (each minimised; each agent's "out" is the soft indicator
-  ``o_i(t) = σ((d − D_i(x_i(t)))/τ_c)`` of being within ``d`` = ``depth`` (1 m) of its goal by
-  walking distance ``D_i``, its goal's field, with ``τ_c`` = 0.1 m as the rollout's counts;
-  agents are removed on reaching the goal, 1 m downstream of where they count as out):
-
-  - ``travel_time``: the mean censored exit time ``(1/N) Σ_i T_i``,
-    ``T_i = Σ_{k<K} Δt (1 − o_i(t_k))`` (s), as :func:`~jcrowd.crowd.rollout.mean_travel_time`
-    with the line replaced by the field.
-  - ``evacuation``: time to empty, the soft maximum ``τ_E log((1/N) Σ_i exp(T_i/τ_E))`` of the
-    ``T_i`` with ``τ_E`` = 1 s: within ``τ_E log N`` below the last exit time, and smooth where
-    the last agent changes.
-  - ``flow``: minus the mean outflow ``(1/T) Σ_i o_i(T)`` (agents/s; reported positive).
-- **The jam limit** (:mod:`jcrowd.crowd.rollout`, "Limits"): where people press into a door the
-  pathwise derivative grows about ×1.4 per step, so the gradient of a whole evacuation is not
-  the slope of the objective. Measured on ``examples/two_exits.toml`` (400 steps): with 40
-  people the exact gradient was NaN (float32 overflow) at 4 of 10 points and 1e17–1e35 at the
-  others; with 20 (the example) finite but 1e2–1e22, its sign agreeing with the forward
-  objective's slope at about half the points; truncated backpropagation
-  (``adjoint_decay`` 0.6) gave 1e-2 with the wrong sign (it loses the queue's effect). So the
-  optimiser uses only the gradient's direction and judges every step by the forward objective.
-  Where nobody queues (``tests/test_optimize.py``'s 8 people) the gradient of every objective
-  equals central differences to 1e-7 relative (float64, h = 1e-7; at h = 1e-5 a switch of the
-  step fell within ±h and the differences were off, flow's by 0.59).
-- **Optimiser**: :func:`~jcrowd.crowd.layout_search.projected_gradient` (its module says how).
+- **The navigation field is rebuilt at every outer iterate and frozen inside the gradient**:
+  ``jax.grad`` reaches the walls' repulsion, slide and spacing, not people re-routing. The
+  forward objective (:func:`forward_value`) rebuilds the field at each ``θ`` and is what the
+  line search compares, so an accepted step lowers the true objective. The field's 0.2 m cells
+  make the forward objective piecewise smooth with small steps.
+- **Obstacle walls are functions of ``θ``**: the free space's boundary without the varied
+  obstacles (built once) plus each varied obstacle's outline computed in JAX from ``θ``
+  (a rectangle's sides, a circle's 64-gon, a polygon's edges). Per-cell wall lists are padded to
+  a power of two so moving an obstacle seldom recompiles.
+- **Agents** are spawned once from the scenario as written, so layouts differ only in layout.
+  An agent inside a varied obstacle at some ``θ`` is an error naming the key to bound tighter.
+  Only groups with a ``goal`` and no ``[[sources]]``.
+- **Objectives** (minimised), from each agent's soft "out" ``o_i(t) = σ((d − D_i(x_i(t)))/τ_c)``
+  within ``d`` = 1 m of its goal by walking distance, ``τ_c`` = 0.1 m: ``travel_time``, the mean
+  censored exit time ``T_i = Σ_k Δt (1 − o_i(t_k))``; ``evacuation``, the soft maximum
+  ``τ_E log((1/N) Σ_i exp(T_i/τ_E))``, ``τ_E`` = 1 s; ``flow``, minus ``(1/T) Σ_i o_i(T)``.
+- **A jam's gradient is not the objective's slope** (:mod:`jcrowd.rollouts.rollout`, "Limits"),
+  so the optimiser uses only the gradient's direction and judges every step by the forward
+  objective. Where nobody queues the gradient of every objective equals central differences
+  (``tests/test_optimize.py``). docs/design/rollouts.md has the measurements.
 
 Conventions: positions ``[x, z]`` in metres, time in seconds; ``θ`` in the key paths' units.
 """
@@ -64,7 +38,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import equinox as eqx
 import jax
@@ -73,16 +47,22 @@ import numpy as np
 import shapely
 from jaxtyping import Array, Float
 
-from jcrowd.crowd.avoidance import AvoidanceParams
-from jcrowd.crowd.dynamics import Pedestrians, World, wall_segments, walls_near_cells
-from jcrowd.crowd.layout_keys import Varied, parse_key_path, varied_parameter, with_values
-from jcrowd.crowd.layout_search import OptimizeResult, projected_gradient
-from jcrowd.crowd.navigation import Navigation, distance_field, field_grid, field_values, rasterize
-from jcrowd.crowd.neighbours import grid_spec
-from jcrowd.crowd.rollout import COUNT_TEMPERATURE, RolloutParams, RolloutSetup, rollout
-from jcrowd.crowd.scene import CLEARANCE_M, NAV_CELL_M
 from jcrowd.errors import JcrowdError
+from jcrowd.pedestrians.navigation import (
+    Navigation,
+    distance_field,
+    field_grid,
+    field_values,
+    rasterize,
+)
+from jcrowd.pedestrians.neighbours import grid_spec
+from jcrowd.pedestrians.params import AvoidanceParams
+from jcrowd.pedestrians.scene import CLEARANCE_M, NAV_CELL_M
+from jcrowd.pedestrians.step import Pedestrians
+from jcrowd.pedestrians.world import World, wall_segments, walls_near_cells
+from jcrowd.rollouts.rollout import COUNT_TEMPERATURE, RolloutParams, RolloutSetup, rollout
 from jcrowd.scenario.geometry import Region
+from jcrowd.scenario.keys import Varied, with_values
 from jcrowd.scenario.layout import Layout, free_space, region_shape
 from jcrowd.scenario.schema import Scenario
 from jcrowd.scenario.spawning import spawn
@@ -92,18 +72,12 @@ __all__ = [
     "OBJECTIVES",
     "OUT_DEPTH",
     "LayoutProblem",
-    "OptimizeResult",
-    "Varied",
     "forward_value",
     "layout_objective",
     "layout_problem",
     "layout_setup",
     "obstacle_walls",
-    "parse_key_path",
-    "projected_gradient",
     "value_and_gradient",
-    "varied_parameter",
-    "with_values",
 ]
 
 OBJECTIVES = ("evacuation", "flow", "travel_time")
@@ -199,7 +173,7 @@ class LayoutProblem:
         avoidance: the avoidance model's parameters.
         depth: ``d`` (m) of the "out" indicator.
         adjoint_decay: ``γ`` of the rollout's truncated backpropagation (1: exact gradient;
-            :class:`~jcrowd.crowd.rollout.RolloutSetup`).
+            :class:`~jcrowd.rollouts.rollout.RolloutSetup`).
     """
 
     scenario: Scenario
@@ -401,7 +375,8 @@ def layout_objective(theta: Float[Array, " V"], setup: LayoutSetup) -> tuple[Arr
     )
     traj = rollout(params, setup.rollout)
     x = traj.position.astype(theta.dtype)
-    depth = field_values(setup.rollout.world.nav, peds.target, x[..., 0], x[..., 1])
+    nav = cast(Navigation, setup.rollout.world.nav)  # layout_setup builds the fields
+    depth = field_values(nav, peds.target, x[..., 0], x[..., 1])
     out = jax.nn.sigmoid((setup.depth - depth.astype(theta.dtype)) / COUNT_TEMPERATURE)
     dt = setup.rollout.dt
     if setup.objective == "flow":

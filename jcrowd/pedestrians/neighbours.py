@@ -17,7 +17,7 @@ cell and a few per agent (a 1 km² ground in 1.6 m cells: 1.6 MB), where a table
 cell would take ``capacity`` times more and be mostly empty where people walk apart. (JAX MD
 sorts the particles by cell; here each agent's rank in its cell comes from rounds of
 scatter-min — round ``r`` places the lowest unplaced id of every cell — which on XLA:CPU is
-several times faster than sorting the crowd: 23 ms to sort 100k keys on this VM.)
+several times faster than sorting the crowd; docs/design/pedestrians.md.)
 
 Conventions: ground positions are ``[x, z]`` in metres (the crowd step's layout); agent ids run
 ``0 … N − 1`` and ``N`` marks no agent. Positions outside the grid are clamped into its

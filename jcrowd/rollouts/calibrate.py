@@ -1,86 +1,37 @@
-"""Calibrating the pedestrian dynamics to measured trajectories, by gradient (issue 22, item 2).
+"""Calibrating the pedestrian model to measured trajectories, by gradient.
 
-The collision-free speed model's parameters (:class:`~jcrowd.crowd.avoidance.AvoidanceParams`),
-the body radius ``r`` and the free walking speed ``v0`` are fitted to measured runs by
-Levenberg–Marquardt (optimistix) through differentiable rollouts (:mod:`jcrowd.crowd.rollout`),
-started at the best point of a coarse grid.
+The model's parameters (:class:`~jcrowd.pedestrians.params.AvoidanceParams`), the body radius
+``r`` and the free walking speed ``v0`` are fitted to measured runs by Levenberg–Marquardt
+(optimistix) through differentiable rollouts (:mod:`jcrowd.rollouts.rollout`), started at the
+best point of a coarse grid. Parameters are fitted as logarithms (positive; relative steps).
 
-Readings taken, and why:
+Readings taken, and why (docs/design/rollouts.md has the measurements):
 
-- **Short horizons from measured states.** A whole HERMES run cannot be differentiated: its
-  dense runs jam before the exit, where the pathwise derivative grows about ×1.4 per step
-  (:mod:`jcrowd.crowd.rollout`, "Limits"). The fit therefore compares the model with the
-  measurement over short *windows*: every ``every_s`` seconds of a run's steady state, every
-  person present is placed where they were measured, with their measured velocity (a
-  ``VELOCITY_S`` difference), and the crowd is simulated ``horizon_s`` seconds (0.5 s: 15 steps
-  of 1/30 s, 8 frames of 16 fps). This is the usual trajectory-based calibration of
-  microscopic models (a prediction from the measured state, not a free run), and it keeps the
-  derivative meaningful: at 1.5 s (45 steps) the Jacobian reached 10³–10⁴ in the densest runs
-  (10² in the free-flow ``uo-050-180-180``), at 0.5 s it stays bounded; at 1.0 s it
-  reached 3.3·10³ and Levenberg–Marquardt stayed at its start.
-- **What is compared: every person's velocity** (``residual="person"``, the default). Per
-  window and per person who starts in the run's measurement area, the simulated minus the
-  measured mean velocity over the horizon (the end positions' difference ÷ ``horizon_s``; both
-  components, m/s; 0 for everyone else). The alternative ``residual="speed"`` compares one
-  number per window, the counted people's mean speed. Per person is what fixes the body
-  radius: with mean speeds the windows determine only a combination of ``T`` and ``r`` — the
-  best ``T`` runs from 0.28 s at ``r`` = 0.2 m to 0.49 s at 0.15 m along a valley whose RMS
-  changes by 7 % (0.146–0.157 m/s), and a (``T``, ``r``) fit from (0.78, 0.26) stopped at
-  (0.12 s, 0.22 m), whose free run is far off (fundamental-diagram speed RMSE 0.179 m/s). A mean
-  lets one person's error cancel another's; per person it cannot, and the Jacobian's smaller
-  singular value rises from 6.6 to 11.
-- **What is fitted: ``T`` and ``r``** (:data:`DEFAULT_NAMES`). ``ℓ = r_i + r_j`` is the spacing
-  at which people stop (Eq. 2), the width of the corridor ahead (Eq. 3) and the repulsion's
-  reach (Eq. 4); JuPedSim's default ``r`` = 0.2 m is half a shoulder width, but the tracked
-  heads come closer than that (in the densest run 5 % of nearest-neighbour distances are under
-  0.31 m; the entrance experiment's crowd stood 0.27 m centre to centre,
-  ``examples/entrance.toml``), and with ``r`` fixed at 0.2 m the windows could only ask for a
-  short ``T`` (0.28 s), which let the corridor without a bottleneck (``uo-180-180-180``) carry
-  the measured flow at a lower density and a higher speed than the congested crowd measured
-  there (fundamental-diagram speed RMSE 0.136–0.141 m/s, no better than the defaults' 0.138
-  m/s).
-- **Where the fit starts: the best point of a coarse grid** (:data:`COARSE_GRID`). The
-  per-person objective has one broad valley, ``T`` rising as ``r`` falls, nearly flat along it
-  (every 2 s, on a grid: RMS within 1.5 % from (0.48, 0.16) to (0.68, 0.13)), and ``r`` enters
-  Eq. 3 through a hard set — who is in the corridor ahead — so the objective is a staircase in
-  ``r`` that the pathwise derivative does not see: Levenberg–Marquardt's steps along the valley
-  are rejected and it reports convergence on a step's edge (there the Jacobian's largest
-  singular value was 2409 against 50 elsewhere). Started at the bench's three starts (×1.3,
-  ×0.7, ×1.3/×0.7 of ``T`` = 0.6 s, ``r`` = 0.2 m), it ended at (0.387 s, 0.193 m), (0.598,
-  0.143) and (0.627, 0.138): 35 % apart (row "calibrate — 2026-12-06 — code 441c356"; the same
-  ×1.3 start reached (0.571, 0.148) in another process). So :func:`calibrate` first evaluates
-  the residual RMS at the start and at every point of the grid (42 for ``T`` and ``r``: 61 s on
-  2 cores, 1.07 s an evaluation of 268 windows) and starts from the least; the gradient then
-  does the fitting (the grid's best, (0.66 s, 0.14 m) at RMS 0.0724 m/s, is 10 % from the fit
-  in ``T``; started from its neighbours in ``T``, (0.42, 0.14) and (0.78, 0.14), the fit ends
-  within 5 % of it, at (0.598, 0.143) and (0.627, 0.138): the grid's spacing does not decide
-  the answer). That point beats each of the three starts (RMS 0.140, 0.080, 0.076), so all
-  three give the same fit, (``T``, ``r``) = (0.602 s, 0.142 m) at RMS 0.0721, whose free run
-  matches the fundamental diagram better than the defaults: speed RMSE 0.094 against 0.138 m/s
-  (row "… code 9a0969a"). Reading taken: a global look at a two-parameter objective before a local
-  fit is the usual cure for a rough one; a start still wins where it beats every grid point
-  (a user's better guess is kept), and ``--no-search`` skips the grid. Tried and dropped: a
-  profile in ``r`` (a 1 cm grid, ``T`` fitted by Levenberg–Marquardt at each): each 1-D fit
-  took 14–15 steps even from its optimum (150–220 s), about 1.5 h a fit. On the model's own
-  trajectories, where the valley is sharp, ``T``, ``r`` and ``v0`` are recovered from ±30 %
-  without the grid (measured within 1 %; ``tests/test_calibrate.py`` bounds it at 5 %).
-- **What else was tried.** Fitting ``desired_speed`` moves it to 1.46 m/s, faster than the
-  free-flow runs' measured 1.34–1.39 m/s, and worsens the fundamental diagram (0.158–0.183
-  m/s); adding ``plain_reaction_time`` is degenerate (``T`` → 0.005 s, ``τ`` → 1.4 s absorb
-  the start's mismatch); the smooth ``V``'s ``sharpness`` barely moves the windows (mean
-  residual RMS 0.287 → 0.271 m/s at ``n`` = 8, worse at 16). The repulsion's
-  ``strength``/``range``, ``wall_strength`` and ``anisotropy`` move the residuals by less than
-  1 % of ``T``'s effect (their columns of the Jacobian at the defaults); a fit of them is set
-  by noise. Any field of :class:`~jcrowd.crowd.avoidance.AvoidanceParams`, ``radius`` and
-  ``desired_speed`` may be named. Parameters are fitted as logarithms (each stays positive; a
-  step is relative).
-- **Structure held by the forward pass.** As in every rollout, who is the nearest neighbour
-  ahead is decided by the forward pass and carries no gradient (:mod:`jcrowd.crowd.rollout`).
+- **Short windows from measured states** (:mod:`jcrowd.rollouts.windows`): every ``every_s``
+  seconds of a run's steady state, everyone present is placed where they were measured with
+  their measured velocity and the crowd is simulated ``horizon_s`` = 0.5 s. A whole run cannot
+  be differentiated (its jams make the derivative grow ×1.4 per step); a prediction from the
+  measured state is the usual trajectory-based calibration of microscopic models, and at 0.5 s
+  the Jacobian stays bounded where at 1–1.5 s it reached 10³–10⁴.
+- **Every person's velocity is compared** (``residual="person"``, the default): per window and
+  per person starting in the measurement area, simulated minus measured mean velocity over the
+  horizon. One mean speed per window (``residual="speed"``) lets one person's error cancel
+  another's and fixes only a combination of ``T`` and ``r``.
+- **``T`` and ``r`` are fitted** (:data:`DEFAULT_NAMES`): ``ℓ = r_i + r_j`` sets where people
+  stop (Eq. 2), the corridor ahead (Eq. 3) and the repulsion's reach (Eq. 4), and the tracked
+  heads come closer than JuPedSim's ``r`` = 0.2 m. Fitting ``v0``, the reaction time or the
+  repulsion's terms is allowed (any field, ``radius``, ``desired_speed``) but not the default.
+- **The fit starts at the best point of a coarse grid** (:data:`COARSE_GRID`, or the start if
+  that is better; ``--no-search`` skips it). The per-person objective has one flat valley and
+  ``r`` enters Eq. 3 through a hard set, so it is a staircase in ``r`` that the pathwise
+  derivative does not see; Levenberg–Marquardt alone stops on a step's edge, different ones
+  from different starts. A global look before a local fit is the usual cure.
+- **Structure held by the forward pass**: who is nearest ahead carries no gradient
+  (:mod:`jcrowd.rollouts.rollout`).
 
-Geometry (:func:`corridor_scene`): the HERMES corridor of the shared data's README — walkable
-``x ∈ [0, b]``, ``y ∈ [-4, 4]`` with the rooms before and after it, an exit of the run's width
-centred in a 0.2 m wall at ``y = -4`` and the target 2.5 m behind it; the measurement area
-``x ∈ [0, b]``, ``y ∈ [-2, 0]``.
+``bench/calibrate.py`` runs the fit on the HERMES corridor runs from three starts and compares
+the fitted model's fundamental diagram with the defaults'; ``tests/test_calibrate.py`` recovers
+``T``, ``r`` and ``v0`` from ±30 % on the model's own trajectories.
 """
 
 from __future__ import annotations
@@ -97,18 +48,15 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from jcrowd.crowd.avoidance import AvoidanceParams
-from jcrowd.crowd.calibrate_windows import (
+from jcrowd.errors import JcrowdError
+from jcrowd.pedestrians.params import AvoidanceParams
+from jcrowd.pedestrians.step import Pedestrians
+from jcrowd.rollouts.rollout import RolloutParams, RolloutSetup, rollout
+from jcrowd.rollouts.windows import (
     DT,
     RADIUS,
     WindowBatch,
-    corridor_scene,
-    make_windows,
-    merge_windows,
 )
-from jcrowd.crowd.dynamics import Pedestrians
-from jcrowd.crowd.rollout import RolloutParams, RolloutSetup, rollout
-from jcrowd.errors import JcrowdError
 
 __all__ = [
     "DEFAULT_NAMES",
@@ -117,11 +65,7 @@ __all__ = [
     "RESIDUALS",
     "SPEED_NAME",
     "Calibration",
-    "WindowBatch",
     "calibrate",
-    "corridor_scene",
-    "make_windows",
-    "merge_windows",
     "parameter_values",
     "person_residuals",
     "window_residuals",
@@ -138,7 +82,7 @@ RADIUS_NAME = "radius"
 avoidance model's fields."""
 
 EXTRA_NAMES = (SPEED_NAME, RADIUS_NAME)
-"""The fitted names that are not fields of :class:`~jcrowd.crowd.avoidance.AvoidanceParams`."""
+"""The fitted names that are not fields of :class:`~jcrowd.pedestrians.params.AvoidanceParams`."""
 
 
 def parameter_values(
