@@ -48,7 +48,7 @@ import numpy as np
 
 from jcrowd.errors import MotionError
 from jcrowd.motion.clip import Motion, left_right_pairs
-from jcrowd.motion.rotation import _xp, quat_rotate
+from jcrowd.motion.rotation import array_module, quat_rotate
 from jcrowd.motion.skeleton import Skeleton, rest_positions
 
 __all__ = [
@@ -126,7 +126,7 @@ def _child_vectors(skeleton: Skeleton, rotations: Any) -> tuple[Any, np.ndarray]
     NumPy in (the offline analysis, float64, no compilation per clip length) gives NumPy out;
     jax arrays give jax arrays.
     """
-    xp = _xp(rotations)
+    xp = array_module(rotations)
     owners, via, offsets = _child_table(skeleton)
     shape = (rotations.shape[0], len(owners), 3)
     v = xp.broadcast_to(xp.asarray(offsets, rotations.dtype), shape)
@@ -138,7 +138,7 @@ def _child_vectors(skeleton: Skeleton, rotations: Any) -> tuple[Any, np.ndarray]
 
 def _pair_error(v_ref: Any, v: Any) -> Any:
     """``(r(t_ref) + r(t)) θ`` for child vectors ``(..., C, 3)``; ``θ`` via atan2 (exact near 0)."""
-    xp = _xp(v_ref, v)
+    xp = array_module(v_ref, v)
     r_ref = xp.linalg.norm(v_ref, axis=-1)
     r = xp.linalg.norm(v, axis=-1)
     theta = xp.arctan2(xp.linalg.norm(xp.cross(v_ref, v), axis=-1), xp.sum(v_ref * v, axis=-1))
