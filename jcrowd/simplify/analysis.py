@@ -214,8 +214,8 @@ def elimination_order(skeleton: Skeleton, importance: np.ndarray) -> tuple[int, 
     mirrored pair (left and right names, :func:`jcrowd.motion.clip.left_right_pairs`) side by
     side, left first, at the larger of its two importances.
 
-    Why pairs (issue 21): on mirrored data the two importances of a pair are nearly equal, and
-    ranked apart the tie fell by noise, so a level kept one knee and froze the other. Ranked as
+    Why pairs: on mirrored data the two importances of a pair are nearly equal, and ranked
+    apart the tie falls by noise, so a level could keep one knee and freeze the other. Ranked as
     one at the larger importance, a pair goes only when neither side is needed; a level's cut
     then falls between pairs (:func:`jcrowd.simplify.levels.pair_safe_counts`).
     """

@@ -101,7 +101,7 @@ def joint_counts(num_joints: int, levels: int, lowest_fraction: float = 0.08) ->
 
 def pair_safe_counts(skeleton: Skeleton, order: tuple[int, ...], counts: list[int]) -> list[int]:
     """``counts`` moved so that no level keeps one joint of a mirrored pair and freezes the
-    other (issue 21): each level freezes a prefix of ``order`` (:func:`plan_level`) that ends
+    other: each level freezes a prefix of ``order`` (:func:`plan_level`) that ends
     between two pairs — the nearest such cut to the one asked for, the smaller on a tie, and
     past the level above's so the counts still fall strictly. Pairs must sit side by side in
     ``order`` (:func:`jcrowd.simplify.analysis.elimination_order` puts them so); a level that
