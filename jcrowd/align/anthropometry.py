@@ -1,50 +1,31 @@
 """Body segments and their masses for any skeleton (paper 004 §3.1).
 
 Paper 004 computes the centre of mass (COM) of every segment and of the whole body "by using
-the anthropometric tables described in [RW03]" (Robbins & Wu 2003, a software tool). That tool is
-not available to us; we use the table it builds on in spirit, the one most used in biomechanics:
-
-    P. de Leva, "Adjustments to Zatsiorsky–Seluyanov's segment inertia parameters",
-    Journal of Biomechanics 29(9):1223–1230, 1996, Table 4 (male subjects).
-
-Mass fractions of body mass (each limb segment is per side) and the segment COM as a fraction
-of the segment's length from its proximal end:
-
-    segment        mass    COM      de Leva's endpoints
-    head + neck    .0694   (.5)     vertex – 7th cervical (we use the bone midpoint, see below)
-    trunk          .4346   (.5)     cervicale – mid-hip   (ditto)
-    upper arm      .0271   .5772    shoulder – elbow joint centre
-    forearm        .0162   .4574    elbow – wrist joint centre
-    hand           .0061   .7900    wrist – 3rd metacarpale
-    thigh          .1416   .4095    hip – knee joint centre
-    shank          .0433   .4459    knee – lateral malleolus
-    foot           .0137   .4415    heel – toe tip
-
-The fractions sum to 1 for a full body. Head and trunk COM positions are defined between
-landmarks (vertex, cervicale, mid-hip) that a capture skeleton does not have, so their mass sits
-at the midpoints of their bones instead.
+the anthropometric tables described in [RW03]" (Robbins & Wu 2003, a software tool). That tool
+is not available to us; we use the table it builds on in spirit, the one most used in
+biomechanics: P. de Leva, "Adjustments to Zatsiorsky–Seluyanov's segment inertia parameters",
+Journal of Biomechanics 29(9):1223–1230, 1996, Table 4 (male subjects), as
+:data:`DE_LEVA_MALE`: each segment's mass as a fraction of body mass (a limb segment per side)
+and its COM as a fraction of its length from the proximal end. The fractions sum to 1 for a
+full body. Head and trunk COMs are defined between landmarks (vertex, cervicale, mid-hip) that a
+capture skeleton does not have, so their mass sits at the midpoints of their bones instead.
 
 A *segment* of a skeleton is the bone from a joint to one of its children (or to an End Site);
 it belongs to the category of its proximal joint's name — in BVH a joint is named after the bone
-it moves (``LeftUpLeg``/``lfemur`` sits at the hip and moves the thigh). Name rules, tried in this
-order (case-insensitive): hand (hand, finger, thumb, index, wrist, palm), forearm (forearm,
-lowerarm, radius, ulna, elbow), upper arm (humerus, upperarm, arm), foot (toe, foot, ankle, heel),
-thigh (upleg, upperleg, thigh, femur, a bare ``hip``), shank (shin, tibia, lowerleg, knee, calf,
-leg), trunk (hips, hipjoint, pelvis, spine, back, chest, thorax, torso, abdomen, waist, root,
-clavicle, shoulder, collar), head (head, neck, skull, jaw). CMU's ``LHipJoint`` is the pelvis
-bone from the root to the hip, hence trunk; ``LeftShoulder``/``lclavicle`` is the shoulder
-girdle, which de Leva counts in the trunk. Sides come from
+it moves (``LeftUpLeg``/``lfemur`` sits at the hip and moves the thigh). The name rules
+(``_RULES``: case-insensitive, the first category that matches wins) put CMU's ``LHipJoint``,
+the pelvis bone from the root to the hip, and ``LeftShoulder``/``lclavicle``, the shoulder
+girdle that de Leva counts in the trunk, in the trunk. Sides come from
 :func:`jcrowd.motion.clip.left_right_pairs`.
 
 Within a limb category and side (trunk and head: the whole category, whatever side a bone is
 on) the table's mass is spread over its bones in proportion to their length; a segment made of
 a single bone puts its COM at the table fraction, several bones (CMU's foot: ankle→toe
 base→toe tip) each count as a uniform rod. Categories a skeleton lacks (no hands) lose their
-share and the rest is rescaled to sum to 1.
-
-Fallback: when the names do not reveal at least a thigh, a shank and a trunk bone, the skeleton
-is unknown to these rules and the whole mass is spread over all bones by length, each a uniform
-rod (COM at its midpoint).
+share and the rest is rescaled to sum to 1. When the names do not reveal at least a thigh, a
+shank and a trunk bone, the skeleton is unknown to these rules and the whole mass is spread
+over all bones by length, each a uniform rod (COM at its midpoint). The table with de Leva's
+landmarks and the name rules in words are in ``docs/design/align.md``.
 """
 
 from __future__ import annotations

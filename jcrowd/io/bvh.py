@@ -19,10 +19,10 @@ Choices: missing rotation axes (fewer than three rotation channels) read as 0° 
 channel means the identity; writing raises if the motion turns about an axis the channels lack.
 Position channels on a non-root joint must be constant (their value joins that joint's offset
 and is written back as zeros); varying ones raise. ``fps = 1 / Frame Time``, snapped to a
-whole number when within 1e-5 of one (``.0083333`` is 1/120 printed to 7 digits). Frame
-values are one token stream (line breaks do not matter) of exactly ``Frames × channels`` values;
-no frame is dropped (that is :func:`jcrowd.motion.clip.drop_tpose_frames`'s job). Every malformed
-input raises :class:`~jcrowd.errors.BVHError` citing ``path:line``; nothing is half-read.
+whole number when within 1e-5 of one (1/120 s printed to 7 decimals reads back as 120.0005 fps).
+Frame values are one token stream (line breaks do not matter) of exactly ``Frames × channels``
+values; no frame is dropped (that is :func:`jcrowd.motion.clip.drop_tpose_frames`'s job). Every
+malformed input raises :class:`~jcrowd.errors.BVHError` citing ``path:line``; nothing is half-read.
 Writing goes to a temporary file in the target folder, renamed into place.
 """
 
@@ -49,8 +49,16 @@ UNIT_SCALES: dict[str, float] = {"m": 1.0, "cmu": 0.056444, "in": 0.0254, "cm": 
 
 # The rest-pose heights [low, high) in file units that identify each unit.
 _HEIGHTS = {"m": (0, 3), "cmu": (14, 46), "in": (46, 110), "cm": (110, 300), "mm": (800, 3000)}
-_DEFAULT_ROOT = ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation")
-_DEFAULT_JOINT = ("Zrotation", "Yrotation", "Xrotation")
+# What write_bvh gives the root and every other joint when no channel lists are passed.
+DEFAULT_ROOT_CHANNELS = (
+    "Xposition",
+    "Yposition",
+    "Zposition",
+    "Zrotation",
+    "Yrotation",
+    "Xrotation",
+)
+DEFAULT_JOINT_CHANNELS = ("Zrotation", "Yrotation", "Xrotation")
 _Pairs = list[tuple[int, int]]  # (column in a joint's channel list, axis 0-2)
 
 
@@ -99,7 +107,7 @@ def load_bvh(path: str | os.PathLike[str], *, scale: float | None = None) -> BVH
     root_pos, angles = np.zeros((frames, 3)), np.zeros((frames, len(joints), 3))
     orders, col = [], 0
     for j, node in enumerate(joints):
-        pos, rot, order = _classify(node.channels, where(p, node.channels_line))
+        pos, rot, order = classify_channels(node.channels, where(p, node.channels_line))
         block = values[:, col : col + len(node.channels)]
         col += len(node.channels)
         for c, axis in pos:
@@ -120,9 +128,9 @@ def load_bvh(path: str | os.PathLike[str], *, scale: float | None = None) -> BVH
     end_parents = tuple(index[id(n.parent)] for n in ends)
     end_offsets = np.array([n.offset for n in ends], np.float64).reshape(-1, 3)
     sk = Skeleton(names, parents, _f32(offsets), end_parents, _f32(end_offsets))  # file units
-    scale, units = _detect_units(sk, p) if scale is None else (scale, _check_scale(scale, p))
+    scale, units = _detect_units(sk, p) if scale is None else (scale, check_scale(scale, p))
     sk = Skeleton(names, parents, _f32(offsets * scale), end_parents, _f32(end_offsets * scale))
-    rotations = _f32(_euler(angles, orders, to_quat=True))
+    rotations = _f32(convert_euler(angles, orders, to_quat=True))
     motion = Motion(sk, rotations, _f32(root_pos * scale), _frame_rate(frame_time))
     return BVHClip(motion, tuple(n.channels for n in joints), float(scale), units, p)
 
@@ -154,7 +162,7 @@ class _Reader:
         return BVHError(f"{where(self.path, self.row if line is None else line)}: {msg}")
 
     def need(self, ok: object, msg: str, line: int | None = None) -> None:
-        _require(ok, str(self.err(msg, line)))
+        require(ok, str(self.err(msg, line)))
 
     def next(self, what: str | None = None) -> str:
         """The next token; ``""`` at the end of the file, or an error if ``what`` was due."""
@@ -174,7 +182,8 @@ class _Reader:
         return self.toks[start : self.col]
 
 
-def _require(ok: object, msg: str) -> None:
+def require(ok: object, msg: str) -> None:
+    """Raise :class:`~jcrowd.errors.BVHError` with ``msg`` unless ``ok``."""
     if not ok:
         raise BVHError(msg)
 
@@ -238,7 +247,7 @@ def _parse_hierarchy(rd: _Reader) -> list[_Node]:
                 rd.need(not top.channels_line, f"expected one CHANNELS in {top.name}, found two")
                 rd.need(n.isdigit(), f"expected a channel count after CHANNELS, found {n!r}")
                 rd.need(len(names) == int(n), f"expected {n} channel names, found {len(names)}")
-                _classify(names, where(rd.path, rd.row))
+                classify_channels(names, where(rd.path, rd.row))
                 top.channels, top.channels_line = names, rd.row
         elif kw == "MOTION":
             rd.need(not top, f"expected '}}' closing {top and top.name} before MOTION, found none")
@@ -250,7 +259,7 @@ def _parse_hierarchy(rd: _Reader) -> list[_Node]:
     raise rd.err("expected MOTION after the hierarchy, found the end of the file")
 
 
-def _classify(names: Sequence[str], ctx: str) -> tuple[_Pairs, _Pairs, str]:
+def classify_channels(names: Sequence[str], ctx: str) -> tuple[_Pairs, _Pairs, str]:
     """A channel list's position and rotation ``(column, axis)`` pairs, and its Euler order:
     the rotation axes in listed order, then the missing ones (read as 0°), e.g. ``YX`` → ``YXZ``."""
     pos: _Pairs = []
@@ -258,9 +267,9 @@ def _classify(names: Sequence[str], ctx: str) -> tuple[_Pairs, _Pairs, str]:
     for c, name in enumerate(names):
         low = name.lower()
         ok = len(low) == 9 and low[0] in "xyz" and low[1:] in ("position", "rotation")
-        _require(ok, f"{ctx}: expected channels X/Y/Z + position/rotation, found {name!r}")
+        require(ok, f"{ctx}: expected channels X/Y/Z + position/rotation, found {name!r}")
         group, axis = rot if low[1:] == "rotation" else pos, "xyz".index(low[0])
-        _require(all(a != axis for _, a in group), f"{ctx}: expected one {name!r}, found two")
+        require(all(a != axis for _, a in group), f"{ctx}: expected one {name!r}, found two")
         group.append((c, axis))
     letters = "".join("XYZ"[a] for _, a in rot)
     return pos, rot, letters + "".join(a for a in "XYZ" if a not in letters)
@@ -324,21 +333,21 @@ def _detect_units(skeleton: Skeleton, path: str) -> tuple[float, str]:
 
 
 def _frame_rate(frame_time: float) -> float:
-    """``1 / Frame Time``, snapped to a whole rate the printed time rounds from (.0083333 → 120)."""
+    """``1 / Frame Time``, snapped to a whole rate the printed time rounds from (1/120 s → 120)."""
     fps = 1.0 / frame_time
     whole = round(fps)
     return float(whole) if whole > 0 and abs(fps / whole - 1.0) < 1e-5 else fps
 
 
-def _check_scale(scale: float, ctx: str) -> str:
+def check_scale(scale: float, ctx: str) -> str:
     """The unit name of a valid explicit scale (``"custom"`` unless it is a known one)."""
     ok = isinstance(scale, numbers.Real) and not isinstance(scale, bool)
     ok = ok and math.isfinite(scale) and scale > 0
-    _require(ok, f"{ctx}: expected scale (file units → metres) > 0, found {scale!r}")
+    require(ok, f"{ctx}: expected scale (file units → metres) > 0, found {scale!r}")
     return next((u for u, v in UNIT_SCALES.items() if math.isclose(scale, v)), "custom")
 
 
-def _euler(x: np.ndarray, orders: list[str], *, to_quat: bool) -> np.ndarray:
+def convert_euler(x: np.ndarray, orders: list[str], *, to_quat: bool) -> np.ndarray:
     """Degrees ``(F, J, 3)`` in each joint's full order ↔ unit quaternions ``(F, J, 4)``."""
     out = np.empty((*x.shape[:2], 4 if to_quat else 3))
     for order in set(orders):

@@ -10,12 +10,12 @@ import numpy as np
 from jcrowd.errors import BVHError
 from jcrowd.io.atomic import write_atomic
 from jcrowd.io.bvh import (
-    _DEFAULT_JOINT,
-    _DEFAULT_ROOT,
-    _check_scale,
-    _classify,
-    _euler,
-    _require,
+    DEFAULT_JOINT_CHANNELS,
+    DEFAULT_ROOT_CHANNELS,
+    check_scale,
+    classify_channels,
+    convert_euler,
+    require,
 )
 from jcrowd.motion.clip import Motion
 from jcrowd.motion.skeleton import Skeleton
@@ -47,28 +47,30 @@ def write_bvh(
     """
     p = os.fspath(path)
     ctx = f"write_bvh({p!r})"
-    _check_scale(scale, ctx)
+    check_scale(scale, ctx)
     ok = isinstance(precision, int) and not isinstance(precision, bool) and 0 <= precision <= 12
-    _require(ok, f"{ctx}: expected precision an int in 0..12, found {precision!r}")
+    require(ok, f"{ctx}: expected precision an int in 0..12, found {precision!r}")
     sk, n = motion.skeleton, motion.skeleton.num_joints
-    chans: list[tuple[str, ...]] = [_DEFAULT_ROOT] + [_DEFAULT_JOINT] * (n - 1)
+    chans: list[tuple[str, ...]] = [DEFAULT_ROOT_CHANNELS] + [DEFAULT_JOINT_CHANNELS] * (n - 1)
     if channels is not None:
         chans = [tuple(c) for c in channels]
-    _require(len(chans) == n, f"{ctx}: expected channels for {n} joints, found {len(chans)}")
-    _require(motion.num_frames > 0, f"{ctx}: expected at least one frame, found none")
+    require(len(chans) == n, f"{ctx}: expected channels for {n} joints, found {len(chans)}")
+    require(motion.num_frames > 0, f"{ctx}: expected at least one frame, found none")
     for name in sk.names:
         ok = bool(name) and name == " ".join(name.split()) and not {"{", "}"} & set(name)
-        _require(ok, f"{ctx}: expected joint names without braces or line breaks, found {name!r}")
-    layout = [_classify(c, f"{ctx}: joint {m!r}") for c, m in zip(chans, sk.names, strict=True)]
+        require(ok, f"{ctx}: expected joint names without braces or line breaks, found {name!r}")
+    layout = [
+        classify_channels(c, f"{ctx}: joint {m!r}") for c, m in zip(chans, sk.names, strict=True)
+    ]
     offsets = np.asarray(sk.offsets, np.float64) / scale
     end_offsets = np.asarray(sk.end_offsets_or_empty(), np.float64) / scale
     q = np.asarray(motion.rotations, np.float64)
     norm = np.linalg.norm(q, axis=-1, keepdims=True)
     root_pos = np.asarray(motion.root_positions, np.float64) / scale
     ok = all(np.isfinite(a).all() for a in (offsets, end_offsets, norm, root_pos))
-    _require(ok, f"{ctx}: expected finite offsets, rotations and positions, found NaN or inf")
-    _require(np.all(norm > 1e-9), f"{ctx}: expected unit quaternions, found a zero quaternion")
-    angles = _euler(q / norm, [order for _, _, order in layout], to_quat=False)
+    require(ok, f"{ctx}: expected finite offsets, rotations and positions, found NaN or inf")
+    require(np.all(norm > 1e-9), f"{ctx}: expected unit quaternions, found a zero quaternion")
+    angles = convert_euler(q / norm, [order for _, _, order in layout], to_quat=False)
 
     columns = []
     for j, (pos, rot, _) in enumerate(layout):
@@ -84,10 +86,10 @@ def write_bvh(
             block[:, c] = angles[:, j, k]
         # 1e-3°: far above float32 round-off (~1e-5°), far below any real rotation.
         lost = np.abs(angles[:, j, len(rot) :]).max(initial=0.0)
-        _require(lost < 1e-3, f"{ctx}: {sk.names[j]!r} turns {lost:.3g}° about an axis it lacks")
+        require(lost < 1e-3, f"{ctx}: {sk.names[j]!r} turns {lost:.3g}° about an axis it lacks")
         missing = [a for a in range(3) if j == 0 and a not in [ax for _, ax in pos]]
         moved = np.abs(root_pos[:, missing]).max(initial=0.0) * scale > 1e-6
-        _require(not moved, f"{ctx}: the root moves along an axis its channels {chans[0]} lack")
+        require(not moved, f"{ctx}: the root moves along an axis its channels {chans[0]} lack")
         columns.append(block)
     header, order = _hierarchy_text(sk, chans, offsets, end_offsets, precision)
     data = np.round(np.concatenate([columns[j] for j in order], axis=1), precision) + 0.0  # no -0

@@ -1,5 +1,5 @@
 """A whole crowd as one glTF 2.0 binary (``.glb``): a skinned body per agent, its animation, the
-ground (issue 20). Written with pygltflib, atomically.
+ground. Written with pygltflib, atomically.
 
 Layout of the file:
 

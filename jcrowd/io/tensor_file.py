@@ -52,7 +52,7 @@ def load_tensor_model(path: str | os.PathLike[str]) -> TensorModel:
     """Read a file written by :func:`save_tensor_model` (checked: version, kind, checksum)."""
     t, meta = load_store(path, kind=KIND)
     cfg = dict(meta["config"])
-    cfg.setdefault("level_fit", "freeze")  # files from before the per-level refit (issue 21)
+    cfg.setdefault("level_fit", "freeze")  # a file that names no level fit holds the freeze fit
     for key in ("max_ranks", "min_ranks"):
         cfg[key] = tuple(cfg[key]) if cfg[key] is not None else None
     skel = skeleton_from_json(meta["skeleton"])

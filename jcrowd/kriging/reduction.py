@@ -137,46 +137,12 @@ def greedy_reduction(
     if normalise:
         c = normalise_controls(c)[0]
     floor = max(d + 2, int(min_samples or 0))
-    if variogram is None:
-        _, residuals = fit_trend(c, v)
-        variogram = choose_exponent(
-            c, residuals, exponents, system=system, estimator=estimator, bins=bins, lag=lag
-        ).fit
-    else:
-        variogram = make_variogram(
-            np.asarray(variogram.theta, np.float64), float(variogram.p), int(variogram.result)
-        )
+    variogram = _reduction_variogram(c, v, variogram, system, exponents, estimator, bins, lag)
     theta = np.asarray(variogram.theta, np.float64)
     p = float(variogram.p)
-
-    active = list(range(s))
-    removed: list[int] = []
-    counts: list[int] = []
-    curve: list[float] = []
-    stopped = "min_samples"
-    while len(active) - 1 >= floor:
-        k = len(active)
-        act = np.asarray(active)
-        scores = np.empty(k)
-        for start in range(0, k, _CHUNK):
-            rows = np.arange(start, min(start + _CHUNK, k))
-            subsets = np.stack([np.delete(act, i) for i in rows])
-            probes = (
-                np.stack([np.asarray([*removed, act[i]]) for i in rows])
-                if strict
-                else (act[rows][:, None])
-            )
-            rho = _reliability_under(c[subsets], c[probes], theta, p, system)
-            scores[rows] = rho.min(axis=1)
-        best = int(np.argmax(scores))
-        counts.append(k)
-        curve.append(float(scores[best]))
-        if scores[best] < tau:
-            stopped = "threshold"
-            break
-        removed.append(int(act[best]))
-        active.pop(best)
-
+    active, removed, counts, curve, stopped = _remove_greedily(
+        c, theta, p, system, tau, floor, strict
+    )
     kept = np.asarray(sorted(active), np.int64)
     if removed:
         final = _reliability_under(c[kept][None], c[np.asarray(removed)][None], theta, p, system)[0]
@@ -191,3 +157,82 @@ def greedy_reduction(
         variogram=variogram,
         stopped=stopped,
     )
+
+
+def _reduction_variogram(
+    c: np.ndarray,
+    v: np.ndarray,
+    variogram: VariogramFit | None,
+    system: System,
+    exponents: Sequence[float],
+    estimator: Estimator,
+    bins: int,
+    lag: Lag,
+) -> VariogramFit:
+    """The fixed variogram: fitted on all samples' residuals as ``fit_kriging`` does, or given."""
+    if variogram is None:
+        _, residuals = fit_trend(c, v)
+        return choose_exponent(
+            c, residuals, exponents, system=system, estimator=estimator, bins=bins, lag=lag
+        ).fit
+    return make_variogram(
+        np.asarray(variogram.theta, np.float64), float(variogram.p), int(variogram.result)
+    )
+
+
+def _candidate_scores(
+    c: np.ndarray,
+    act: np.ndarray,
+    removed: list[int],
+    theta: np.ndarray,
+    p: float,
+    system: System,
+    strict: bool,
+) -> np.ndarray:
+    """Each active sample's score: ρ at it (``strict``: the least over it and ``removed``)
+    under the active set without it, in chunks of ``_CHUNK`` candidates."""
+    k = len(act)
+    scores = np.empty(k)
+    for start in range(0, k, _CHUNK):
+        rows = np.arange(start, min(start + _CHUNK, k))
+        subsets = np.stack([np.delete(act, i) for i in rows])
+        probes = (
+            np.stack([np.asarray([*removed, act[i]]) for i in rows])
+            if strict
+            else (act[rows][:, None])
+        )
+        rho = _reliability_under(c[subsets], c[probes], theta, p, system)
+        scores[rows] = rho.min(axis=1)
+    return scores
+
+
+def _remove_greedily(
+    c: np.ndarray,
+    theta: np.ndarray,
+    p: float,
+    system: System,
+    tau: float,
+    floor: int,
+    strict: bool,
+) -> tuple[list[int], list[int], list[int], list[float], str]:
+    """Remove the best-scoring sample while its score is ≥ τ and more than ``floor`` remain.
+
+    Returns ``(active, removed, counts, curve, stopped)`` as :class:`Reduction` reports them.
+    """
+    active = list(range(c.shape[0]))
+    removed: list[int] = []
+    counts: list[int] = []
+    curve: list[float] = []
+    stopped = "min_samples"
+    while len(active) - 1 >= floor:
+        act = np.asarray(active)
+        scores = _candidate_scores(c, act, removed, theta, p, system, strict)
+        best = int(np.argmax(scores))
+        counts.append(len(active))
+        curve.append(float(scores[best]))
+        if scores[best] < tau:
+            stopped = "threshold"
+            break
+        removed.append(int(act[best]))
+        active.pop(best)
+    return active, removed, counts, curve, stopped

@@ -21,8 +21,8 @@ prediction jump at the samples, as in PyKrige's ``exact_values=True``).
 
 Reliability. Paper 001 App. B defines ρ(c) = 1 − σ²(c)/(θ0 + θ1) with σ²(c) = Σ_i b_i γ*(h_i).
 With a fitted nugget θ0 that ρ is capped near 1 − θ0/(θ0 + θ1) everywhere but exactly at a
-sample (every lag h > 0 pays the whole nugget), so the paper's thresholds (0.85, 0.9) were
-never met on our captures (nugget share 0.28 on cmu16). Reading taken: the nugget is
+sample (every lag h > 0 pays the whole nugget), so the paper's thresholds (0.85, 0.9) are
+not met on our captures (nugget share 0.28 on cmu16). Reading taken: the nugget is
 measurement error — the capture-to-capture variation of one person's gait at the same
 controls, which no control can predict — and ρ measures how well the *control-dependent
 signal* is determined: ``σ_S²(c) = Σ_i b_i γ_S(h_i)`` with ``γ_S = γ − θ0`` for h > 0 (the
@@ -55,6 +55,7 @@ from jcrowd.kriging.crossval import (
 )
 from jcrowd.kriging.model import KrigingModel
 from jcrowd.kriging.system import (
+    Operators,
     System,
     check_system,
     default_rcond,
@@ -154,8 +155,32 @@ def fit_kriging(
     if not rcond > 0.0:
         raise KrigingError(f"rcond: expected a positive cut-off, found {rcond}")
     coef, residuals = fit_trend(c, v)
+    variogram = _model_variogram(
+        c, residuals, variogram, system, exponents, estimator, bins, lag, dtype
+    )
+    ops = system_operators(
+        c, np.asarray(variogram.theta, np.float64), float(variogram.p), system, rcond
+    )
+    return _assemble_model(
+        raw, mean, scale, coef, residuals, ops, variogram, value_shape, system, dtype
+    )
+
+
+def _model_variogram(
+    c: np.ndarray,
+    residuals: np.ndarray,
+    variogram: VariogramFit | None,
+    system: System,
+    exponents: Sequence[float],
+    estimator: Estimator,
+    bins: int,
+    lag: Lag,
+    dtype: Any,
+) -> VariogramFit:
+    """The variogram the model keeps: chosen by leave-one-out on the residuals, or the given
+    one rebuilt in ``dtype``."""
     if variogram is None:
-        variogram = choose_exponent(
+        return choose_exponent(
             c,
             residuals,
             exponents,
@@ -165,15 +190,27 @@ def fit_kriging(
             lag=lag,
             dtype=dtype,
         ).fit
-    else:
-        variogram = make_variogram(
-            np.asarray(variogram.theta, np.float64),
-            float(variogram.p),
-            int(variogram.result),
-            dtype,
-        )
-    theta = np.asarray(variogram.theta, np.float64)
-    ops = system_operators(c, theta, float(variogram.p), system, rcond)
+    return make_variogram(
+        np.asarray(variogram.theta, np.float64),
+        float(variogram.p),
+        int(variogram.result),
+        dtype,
+    )
+
+
+def _assemble_model(
+    raw: np.ndarray,
+    mean: np.ndarray,
+    scale: np.ndarray,
+    coef: np.ndarray,
+    residuals: np.ndarray,
+    ops: Operators,
+    variogram: VariogramFit,
+    value_shape: tuple[int, ...],
+    system: System,
+    dtype: Any,
+) -> KrigingModel:
+    """The float64 fit-time pieces as a :class:`KrigingModel` of ``dtype`` arrays."""
 
     def arr(x: np.ndarray) -> jax.Array:
         return jnp.asarray(x, dtype)

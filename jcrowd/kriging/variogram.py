@@ -156,6 +156,21 @@ def experimental_variogram(
     """
     c = as_controls(controls)
     s = c.shape[0]
+    _check_binning(estimator, lag, bins, max_lag_fraction)
+    dis = _sample_dissimilarity(s, values, dissimilarity)
+    iu = np.triu_indices(s, 1)
+    h = _pair_distances(c)[iu]
+    h_max = float(h.max())
+    if h_max <= 0.0:
+        raise KrigingError("all control points coincide; a variogram needs distinct lags")
+    lags, gamma, counts = _binned_estimate(
+        h, dis[iu], h_max * max_lag_fraction, bins, estimator, lag
+    )
+    return ExperimentalVariogram(lags, gamma, counts, h_max, estimator)
+
+
+def _check_binning(estimator: str, lag: str, bins: int, max_lag_fraction: float) -> None:
+    """Reject an unknown estimator or lag rule, fewer than one bin or a fraction outside (0, 1]."""
     if estimator not in ("cressie", "matheron"):
         raise KrigingError(f"estimator: expected 'cressie' or 'matheron', found {estimator!r}")
     if lag not in ("centre", "mean"):
@@ -164,6 +179,10 @@ def experimental_variogram(
         raise KrigingError(
             f"bins must be ≥ 1 and max_lag_fraction in (0, 1]; found {bins}, {max_lag_fraction}"
         )
+
+
+def _sample_dissimilarity(s: int, values: Any, dissimilarity: Any) -> np.ndarray:
+    """The ``(S, S)`` dissimilarity: computed from ``values`` or checked as given."""
     if dissimilarity is None:
         if values is None:
             raise KrigingError("experimental_variogram needs `values` or `dissimilarity`")
@@ -171,21 +190,20 @@ def experimental_variogram(
             raise KrigingError(
                 f"values: expected {s} samples (one per control row), found {np.shape(values)[0]}"
             )
-        dis = pairwise_dissimilarity(values)
-    else:
-        dis = np.asarray(dissimilarity, np.float64)
-        if dis.shape != (s, s) or not np.all(np.isfinite(dis)) or np.any(dis < 0):
-            raise KrigingError(
-                f"dissimilarity: expected a finite, non-negative ({s}, {s}) matrix, "
-                f"found shape {dis.shape}"
-            )
-    iu = np.triu_indices(s, 1)
-    h = _pair_distances(c)[iu]
-    d = dis[iu]
-    h_max = float(h.max())
-    if h_max <= 0.0:
-        raise KrigingError("all control points coincide; a variogram needs distinct lags")
-    h_lim = max_lag_fraction * h_max
+        return pairwise_dissimilarity(values)
+    dis = np.asarray(dissimilarity, np.float64)
+    if dis.shape != (s, s) or not np.all(np.isfinite(dis)) or np.any(dis < 0):
+        raise KrigingError(
+            f"dissimilarity: expected a finite, non-negative ({s}, {s}) matrix, "
+            f"found shape {dis.shape}"
+        )
+    return dis
+
+
+def _binned_estimate(
+    h: np.ndarray, d: np.ndarray, h_lim: float, bins: int, estimator: str, lag: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(lags, γ̄, counts)`` per bin from pair lags ``h`` and dissimilarities ``d`` ≤ ``h_lim``."""
     step = h_lim / bins
     inside = h <= h_lim * (1.0 + 1e-12)
     idx = np.minimum((h[inside] / step).astype(np.int64), bins - 1)
@@ -202,7 +220,7 @@ def experimental_variogram(
         lags = centres
     else:
         lags = np.where(counts > 0, np.bincount(idx, h[inside], minlength=bins) / n, centres)
-    return ExperimentalVariogram(lags, gamma, counts, h_max, estimator)
+    return lags, gamma, counts
 
 
 # ----------------------------------------------------------------------------- models

@@ -24,14 +24,17 @@ the error with and without clamping).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jcrowd.errors import DataError
 from jcrowd.kriging.rbf import fit_rbf, predict_nearest, predict_rbf
 from jcrowd.kriging.universal import fit_kriging, kriging_variance, normalise_controls, predict
+from jcrowd.kriging.variogram_fit import VariogramFit
 from jcrowd.model.motion_model import (
     MotionModel,
     clamp_controls,
@@ -75,6 +78,50 @@ def leave_one_clip_out(
     ``skate_raw_cm`` (before), and a ``"captures"`` entry holds the samples' own ``skate_cm``
     (their aligned data decoded the same way, so all figures are at the model rate).
     """
+    data = _shared_data(tensor, controls, level, methods)
+    errors: dict[str, list[tuple[float, ...]]] = {m: [] for m in methods}
+    z_scores: list[float] = []
+    for group in np.unique(tensor.groups):
+        out = tensor.groups == group
+        train = ~out
+        if np.count_nonzero(train) < data.c_norm.shape[1] + 2:
+            continue
+        c_train = data.c_norm[train]
+        box = np.stack([c_train.min(axis=0), c_train.max(axis=0)], axis=1)
+        q = jnp.asarray(clamp_controls(data.c_norm[out], box), jnp.float32)
+        ys, z = _core_predictions(data, train, out, q, methods)
+        z_scores.extend(z)
+        ys.update(_motion_predictions(data, train, q, methods))
+        for method, y in ys.items():
+            errors[method].extend(_sample_errors(tensor, data.truth, y, out, skate))
+    return _summary(tensor, data.truth, errors, z_scores, skate)
+
+
+@dataclass(frozen=True)
+class _SharedData:
+    """What every fold shares (module doc: bases and variograms are fitted on all samples).
+
+    ``c_norm`` ``(S, d)`` normalised controls; ``cores`` ``(S, R_P, R_T)``; ``motions``
+    ``(S, T, P)`` whole aligned motions and ``truth`` the same scaled; ``u_p``, ``u_t`` the
+    level's pose and time bases; the variograms of the methods asked for (else ``None``, ``[]``).
+    """
+
+    c_norm: np.ndarray
+    cores: np.ndarray
+    motions: np.ndarray
+    truth: np.ndarray
+    u_p: np.ndarray
+    u_t: np.ndarray
+    scale: np.ndarray
+    variogram: VariogramFit
+    pose_variogram: VariogramFit | None
+    element_variograms: list[VariogramFit]
+
+
+def _shared_data(
+    tensor: TensorModel, controls: Sequence[str], level: int, methods: Sequence[str]
+) -> _SharedData:
+    """The level's cores and bases, the normalised controls and the variograms, fitted once."""
     lv = tensor.levels[level]
     u_p, u_t, u_s = lv.tucker.factors
     cores = sample_cores(lv.tucker.core, u_s)
@@ -87,6 +134,7 @@ def leave_one_clip_out(
     # Paper 001's per-pose kriging: whole aligned motions (every frame's pose vector, ΔA
     # included, scaled), not the reduced cores, with one variogram over whole-motion distances.
     motions = np.transpose(tensor.tensor, (2, 1, 0))
+    pose_variogram, element_variograms = None, []
     if "per_pose" in methods:
         pose_variogram = fit_kriging(c_norm, motions, normalise=False).variogram
     if "per_element" in methods:
@@ -98,60 +146,98 @@ def leave_one_clip_out(
             fit_kriging(c_norm, motions[:, :, k], normalise=False).variogram
             for k in range(motions.shape[2])
         ]
-    errors: dict[str, list[tuple[float, ...]]] = {m: [] for m in methods}
+    return _SharedData(
+        c_norm,
+        cores,
+        motions,
+        truth,
+        u_p,
+        u_t,
+        tensor.layout.scale,
+        variogram,
+        pose_variogram,
+        element_variograms,
+    )
+
+
+def _core_predictions(
+    data: _SharedData, train: np.ndarray, out: np.ndarray, q: jax.Array, methods: Sequence[str]
+) -> tuple[dict[str, np.ndarray], list[float]]:
+    """Kriging, RBF and nearest sample of the cores at ``q``, decoded to scaled pose vectors
+    ``(n_out, T, P)``, and the kriging z-scores of the left-out samples."""
+    c_train, k_train = data.c_norm[train], data.cores[train]
+    preds: dict[str, np.ndarray] = {}
     z_scores: list[float] = []
-    for group in np.unique(tensor.groups):
-        out = tensor.groups == group
-        train = ~out
-        if np.count_nonzero(train) < len(idx) + 2:
-            continue
-        preds: dict[str, np.ndarray] = {}
-        box = np.stack([c_norm[train].min(axis=0), c_norm[train].max(axis=0)], axis=1)
-        q = jnp.asarray(clamp_controls(c_norm[out], box), jnp.float32)
-        if "kriging" in methods:
-            km = fit_kriging(c_norm[train], cores[train], variogram, normalise=False)
-            preds["kriging"] = np.asarray(predict(km, q))
-            # Calibration: the core-space error against the std the model predicts for an
-            # unseen capture there (kriging variance: signal, the capture's nugget, the mean).
-            miss = (preds["kriging"] - cores[out]).reshape(int(np.count_nonzero(out)), -1)
-            sd = np.sqrt(np.maximum(np.asarray(kriging_variance(km, q), np.float64), 1e-30))
-            z_scores.extend((np.linalg.norm(miss, axis=1) / sd).tolist())
-        if "rbf" in methods:
-            rm = fit_rbf(c_norm[train], cores[train])
-            preds["rbf"] = np.asarray(predict_rbf(rm, q))
-        if "nearest" in methods:
-            preds["nearest"] = np.asarray(predict_nearest(c_norm[train], cores[train], q))
-        ys = {
-            m: np.einsum("pr,srt,ut->sup", u_p, np.asarray(k, np.float64), u_t)
-            * tensor.layout.scale
-            for m, k in preds.items()
-        }
-        if "per_pose" in methods:
-            pm = fit_kriging(c_norm[train], motions[train], pose_variogram, normalise=False)
-            got = np.asarray(predict(pm, q), np.float64)
-            ys["per_pose"] = got * tensor.layout.scale
-        if "per_element" in methods:
-            cols = [
-                np.asarray(
-                    predict(
-                        fit_kriging(c_norm[train], motions[train][:, :, k], v, normalise=False), q
-                    ),
-                    np.float64,
-                )
-                for k, v in enumerate(element_variograms)
-            ]
-            ys["per_element"] = np.stack(cols, axis=-1) * tensor.layout.scale
-        for method, y in ys.items():
-            for j, s in enumerate(np.nonzero(out)[0]):
-                h = float(tensor.heights[s])
-                a = root_frame_positions(truth[s], tensor, h)
-                b = root_frame_positions(y[j], tensor, h)
-                dist = np.linalg.norm(a[0] - b[0], axis=-1)
-                row = [float(dist.mean()), float(dist.max()), float(np.linalg.norm(a[1] - b[1]))]
-                if skate:
-                    raw = _decoded(tensor, y[j], h)
-                    row += [100 * foot_skate(lock_feet(raw)), 100 * foot_skate(raw)]
-                errors[method].append(tuple(row))
+    if "kriging" in methods:
+        km = fit_kriging(c_train, k_train, data.variogram, normalise=False)
+        preds["kriging"] = np.asarray(predict(km, q))
+        # Calibration: the core-space error against the std the model predicts for an
+        # unseen capture there (kriging variance: signal, the capture's nugget, the mean).
+        miss = (preds["kriging"] - data.cores[out]).reshape(int(np.count_nonzero(out)), -1)
+        sd = np.sqrt(np.maximum(np.asarray(kriging_variance(km, q), np.float64), 1e-30))
+        z_scores.extend((np.linalg.norm(miss, axis=1) / sd).tolist())
+    if "rbf" in methods:
+        rm = fit_rbf(c_train, k_train)
+        preds["rbf"] = np.asarray(predict_rbf(rm, q))
+    if "nearest" in methods:
+        preds["nearest"] = np.asarray(predict_nearest(c_train, k_train, q))
+    ys = {
+        m: np.einsum("pr,srt,ut->sup", data.u_p, np.asarray(k, np.float64), data.u_t) * data.scale
+        for m, k in preds.items()
+    }
+    return ys, z_scores
+
+
+def _motion_predictions(
+    data: _SharedData, train: np.ndarray, q: jax.Array, methods: Sequence[str]
+) -> dict[str, np.ndarray]:
+    """Paper 001's kriging of whole aligned motions at ``q`` (per pose, per element), scaled."""
+    c_train, m_train = data.c_norm[train], data.motions[train]
+    ys: dict[str, np.ndarray] = {}
+    if "per_pose" in methods:
+        pm = fit_kriging(c_train, m_train, data.pose_variogram, normalise=False)
+        got = np.asarray(predict(pm, q), np.float64)
+        ys["per_pose"] = got * data.scale
+    if "per_element" in methods:
+        cols = [
+            np.asarray(
+                predict(fit_kriging(c_train, m_train[:, :, k], v, normalise=False), q),
+                np.float64,
+            )
+            for k, v in enumerate(data.element_variograms)
+        ]
+        ys["per_element"] = np.stack(cols, axis=-1) * data.scale
+    return ys
+
+
+def _sample_errors(
+    tensor: TensorModel, truth: np.ndarray, y: np.ndarray, out: np.ndarray, skate: bool
+) -> list[tuple[float, ...]]:
+    """Per left-out sample: mean and max joint error and root error (m) of the prediction
+    ``y`` in the root frame; with ``skate``, its foot skate (cm) after and before locking."""
+    rows = []
+    for j, s in enumerate(np.nonzero(out)[0]):
+        h = float(tensor.heights[s])
+        a = root_frame_positions(truth[s], tensor, h)
+        b = root_frame_positions(y[j], tensor, h)
+        dist = np.linalg.norm(a[0] - b[0], axis=-1)
+        row = [float(dist.mean()), float(dist.max()), float(np.linalg.norm(a[1] - b[1]))]
+        if skate:
+            raw = _decoded(tensor, y[j], h)
+            row += [100 * foot_skate(lock_feet(raw)), 100 * foot_skate(raw)]
+        rows.append(tuple(row))
+    return rows
+
+
+def _summary(
+    tensor: TensorModel,
+    truth: np.ndarray,
+    errors: dict[str, list[tuple[float, ...]]],
+    z_scores: list[float],
+    skate: bool,
+) -> dict[str, dict[str, float]]:
+    """Each method's errors averaged over the left-out samples, kriging's ``z_rms`` and, with
+    ``skate``, the captures' own foot skate."""
     keys = ("joint_m", "max_joint_m", "root_m", "skate_cm", "skate_raw_cm")
     result = {
         m: dict(zip(keys, np.mean(v, axis=0).tolist(), strict=False)) for m, v in errors.items()

@@ -1,4 +1,4 @@
-"""The footprint map of a motion model and its least-squares solve (issue 22 item 4).
+"""The footprint map of a motion model and its least-squares solve.
 
 The map (1) of :mod:`jcrowd.model.footprints`: controls ``c`` → kriging weights ``b(c)`` and
 core ``K(c)`` (000 Eq. 8) → pose vectors → root path and forward kinematics → the cycle's three

@@ -3,64 +3,33 @@
 Paper 001 §5.3 (Fig. 12) drives a gait by "the footprints of both feet as 4D control
 parameters": its samples are kriged over the footprints themselves. jcrowd's models are kriged
 over the cycle's root displacement and turn ``(dx, dz, dyaw)`` (:mod:`jcrowd.model.motion_model`),
-so a footprint query is answered the other way round (issue 22, item 4): per gait cycle, solve
-for the controls ``c`` whose synthesized cycle puts its planted feet on the given footprints,
+so a footprint query is answered the other way round: per gait cycle, solve for the controls
+``c`` whose synthesized cycle puts its planted feet on the given footprints,
 
     min_c  ‖F(c) − F*‖²,   F(c) = footprints of FK(decode(U_P K(c) U_Tᵀ))       (1)
 
 by Levenberg–Marquardt (optimistix) through the kriging weights ``b(c)`` (000 Eq. 8), the
-pose-vector decode and forward kinematics, all differentiated by JAX. The *forward rule* it is
-compared with takes the controls from the footprints' displacement alone (below).
+pose-vector decode and forward kinematics, all differentiated by JAX. Every query is clamped to
+the model's control range before kriging, as :func:`~jcrowd.model.motion_model.synthesize_clip`
+does; inside the solve the clamp is part of (1), so a coordinate pressed against its bound
+stays there.
 
-Footprint format (readings taken, stated):
+A cycle's footprints are ``(3, 2)``: the ``[x, z]`` (m) of the ankle (the heel) of the left
+foot at the opening heel strike, the right foot at its strike and the left foot at the closing
+strike; only their positions relative to the opening footprint are matched. With
+``heading=None`` each cycle's footprints are in its own start frame (+Z ahead, x to the
+character's left); with ``heading=θ`` they are world positions and cycle ``k + 1`` starts
+facing where cycle ``k``'s synthesized clip ends. ``F(c)`` (:mod:`jcrowd.model.footprint_map`)
+reads the model's own cycle at fixed aligned frames, without foot locking;
+:func:`footprint_errors` measures the delivered clip as a capture is measured.
 
-- A cycle is the model's sample: two steps from a left heel strike to the next
-  (:mod:`jcrowd.motion.gait`). Its footprints are ``(3, 2)``: the ``[x, z]`` (m) of the left
-  foot at the opening heel strike, the right foot at its heel strike, and the left foot at the
-  closing heel strike — paper 001's two footprints plus the foot the cycle stands on at its start.
-- A foot's footprint is its ankle joint (the heel; :func:`jcrowd.motion.gait.find_feet` picks
-  it by name on any skeleton) at that foot's heel strike, the onset of its contact
-  (:func:`jcrowd.motion.gait.foot_contacts`). A heel strike puts the heel down first, so the
-  ankle is the planted joint there (the lower of ankle and toe, as in
-  :mod:`jcrowd.motion.footlock`).
-- Only the footprints' positions *relative to the opening left footprint* are matched: the cycle
-  stands on that foot when it starts, so the controls place the right and closing left
-  footprints from it. Where the root stands over the opening footprint is the model's posture
-  at the strike, which no control of a cycle moves; a chain of cycles hands the closing left
-  foot on as the next cycle's opening one.
-- Frames. With ``heading=None`` every cycle's footprints are in its own start frame: heading
-  +Z at the opening strike, x to the character's left (as the controls, DESIGN §3); cycles are
-  independent. With ``heading=θ`` the footprints are world positions, cycle 0 starts facing
-  ``θ`` (radians, + = left of +Z), and cycle ``k + 1`` starts facing where cycle ``k``'s
-  *synthesized* clip ends (cycle by cycle, forward); rotating and translating every footprint
-  and ``θ`` together leaves the controls unchanged.
-
-The synthesized footprints ``F(c)`` (:mod:`jcrowd.model.footprint_map`, in JAX) are read from
-the decoded cycle at fixed *aligned* frames:
-0 (the opening strike: every sample starts there), the right strike and the closing strike,
-found once per model and level by running the contact detector on the cycle synthesized at the
-samples' median controls and mapping its frames to aligned time through the decoded ΔA. Cycles
-are time-aligned by DTW, so a strike sits at about the same aligned frame for every control.
-Between aligned frames the pose vector and root path are interpolated linearly. What the solver
-matches is therefore the model's own cycle, without foot locking (which moves the root).
-:func:`footprint_errors` measures the delivered clip instead (unwarped, strikes detected), as a
-capture is measured; on the model's own footprints the two agree to under 1.5 cm.
-
-Measured (``bench/footprints.py``, cmu16, cycles of takes held back from the fit): mean
-planted-foot error 3.4 cm solved vs 12.0 cm by the forward rule (0.28×); on turning cycles
-5.4 vs 22.9 cm.
-
-Forward rule (reading of "controls from the footprints' displacement alone"): ``(dx, dz)`` is
-the left foot's displacement over the cycle, closing minus opening footprint, in the start
-frame — for a periodic gait the root moves as the foot does — and ``dyaw = 2·atan2(dx, dz)``,
-the turn of a constant-curvature path whose chord is that displacement (the crowd's clip rule,
-:mod:`jcrowd.crowd.clips`, uses the same relation the other way). It ignores the right
-footprint and the foot's offset from the root, which turns with the body. Other controls
-(``speed``) take the samples' median; ``height`` the character's height.
-
-Every query is clamped to the model's control range before kriging, as
-:func:`~jcrowd.model.motion_model.synthesize_clip` does; inside the solve the clamp is part of
-(1), so a coordinate pressed against its bound stays there.
+The *forward rule* it is compared with takes ``(dx, dz)`` from the left foot's displacement
+over the cycle and ``dyaw = 2·atan2(dx, dz)``, the turn of a constant-curvature path with that
+chord; it ignores the right footprint and the foot's offset from the root, which turns with the
+body. Why solve: on cycles of cmu16 takes held back from the fit, the solved controls plant the
+feet 3.4 cm from the footprints on average against 12.0 cm by the forward rule, and 5.4 against
+22.9 cm on turning cycles (``bench/footprints.py``). The readings taken for the footprint
+format, the frames and the strike frames are in ``docs/design/model.md``.
 """
 
 from __future__ import annotations
@@ -212,7 +181,7 @@ def controls_for_footprints(
 
     Returns:
         :class:`FootprintControls`: the solution (1), started from and compared with the forward
-        rule. Paper 001 §5.3 (Fig. 12), issue 22.
+        rule. Paper 001 §5.3 (Fig. 12).
     """
     _check_level(model, level)
     fp = _check_footprints(footprints)

@@ -17,13 +17,12 @@ Eq. 8 vanish and Eq. 5 reduces to Eq. 6 over *every* non-root joint of the full 
 
 solved per frame by Levenberg–Marquardt (analytic Jacobian) from ω = 0, the un-refitted level. The
 position-space route of :mod:`jcrowd.simplify` needs a second step (rotation recovery) that
-does not see the frozen joints' positions; measured on the shared ``cmu16`` samples, it *raised*
-the whole-body error of the coarse levels (5.1 → 6.3 cm at 3 joints), while this form can only
-lower it (LM never accepts a step that raises the sum of squares). Turning the root as well
-matters at the coarsest levels: with the spine frozen, only the pelvis can carry the trunk
-(cmu16 at 5 kept joints: 1.95 → 1.91 cm per metre of height with the kept joints alone, 1.23
-with the root). The root's position, height, velocity and yaw rate are the sample's: the
-controls and the clip scheduler read them.
+does not see the frozen joints' positions, so it can leave a coarse level's whole-body error
+above the un-refitted one; this form can only lower it (LM never accepts a step that raises the
+sum of squares). The root turns as well because at the coarsest levels, with the spine frozen,
+only the pelvis can carry the trunk (``docs/design/model.md`` gives the cmu16 figures for both).
+The root's position, height, velocity and yaw rate are the sample's: the controls and the clip
+scheduler read them.
 
 Pure: arrays in, arrays out; one ``jit``-compiled solve over every frame per (skeleton, kept set).
 """
@@ -74,15 +73,14 @@ def _refit(
     """Levenberg–Marquardt on every frame at once, ``max_steps`` damped Gauss–Newton steps.
 
     ``moving`` (the joints that turn) and ``max_steps`` are static: one trace per level, whose
-    normal equations have only the moving joints' unknowns (a traced mask over every joint
-    compiles once per skeleton but solves 3J unknowns per frame: measured on ``cmu16``, 30 %
-    slower in all). Each step linearises at the current pose: turning a moving joint ``m`` by
-    ``exp(ω)`` on the right turns its sub-tree about its world axes ``G_m e_a``, so
-    ``∂p_k/∂ω_{m,a} = (G_m e_a) × (p_k − p_m)`` for every descendant ``k`` (0 otherwise) — the
-    analytic Jacobian from one forward kinematics. The step
-    solves ``(JᵀJ + λ diag JᵀJ) δ = −Jᵀr`` and is taken (``q_m ← q_m ⊗ exp(δ_m)``) only if it
-    lowers ‖r‖²; λ halves after a taken step and rises tenfold after a refused one
-    (Marquardt 1963), so the cost never rises.
+    normal equations have only the moving joints' unknowns (a traced mask over every joint would
+    solve 3J unknowns per frame; ``docs/design/model.md``). Each step linearises at the current
+    pose: turning a moving joint ``m`` by ``exp(ω)`` on the right turns its sub-tree about its
+    world axes ``G_m e_a``, so ``∂p_k/∂ω_{m,a} = (G_m e_a) × (p_k − p_m)`` for every descendant
+    ``k`` (0 otherwise) — the analytic Jacobian from one forward kinematics. The step solves
+    ``(JᵀJ + λ diag JᵀJ) δ = −Jᵀr`` and is taken (``q_m ← q_m ⊗ exp(δ_m)``) only if it lowers
+    ‖r‖²; λ halves after a taken step and rises tenfold after a refused one (Marquardt 1963), so
+    the cost never rises.
     """
     idx = np.asarray(moving, np.int64)
     mask = jnp.asarray(_ancestors(skeleton)[1:][:, idx], start.dtype)  # (J-1, M)

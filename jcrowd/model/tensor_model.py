@@ -16,7 +16,7 @@ The first half of the fit (DESIGN §4 steps 1–7; papers 000 §3.2, §4.1–4.3
    level's kept joints are refitted sample by sample and frame by frame so that the whole body
    keeps its shape with the dropped joints frozen (:mod:`jcrowd.model.level_refit`); that
    level's Tucker model is then HOOI of the refitted tensor at the level's ranks, warm-started
-   from the key level. ``level_fit="freeze"`` is the earlier fit: dataset-mean references and
+   from the key level. ``level_fit="freeze"`` is the simpler fit: dataset-mean references and
    the captured rotations of the kept joints (``bench/tensor.py`` reports both).
 
 The reference sample is the medoid of the samples under the DTW-free pose distance of their
@@ -222,7 +222,7 @@ def build_tensor_model(
     min_r = config.min_ranks or (min(7, max_r[0]), min(7, max_r[1]), min(9, max_r[2]))
     kl = key_levels(tensor, config.key_levels, max_r, min_r)
     controls_h = np.array([smp.height for smp in samples])
-    # Mirrored pairs are kept or frozen together at every level (issue 21).
+    # Mirrored pairs are kept or frozen together at every level.
     counts = pair_safe_counts(skel, order, joint_counts(skel.num_joints, config.key_levels))
     levels = []
     for level, count in zip(kl.levels, counts, strict=True):

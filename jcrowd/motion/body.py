@@ -137,7 +137,8 @@ class BoundBody:
     fitted: Float[np.ndarray, "B 3"] | None = None
 
 
-def _rest_unit(skeleton: Skeleton) -> tuple[np.ndarray, float]:
+def rest_joints_and_height(skeleton: Skeleton) -> tuple[np.ndarray, float]:
+    """Rest-pose joint positions ``(J, 3)`` and the skeleton's height (End Sites included)."""
     joints, ends = rest_positions(skeleton)
     ys = np.concatenate([joints[:, 1], ends[:, 1]])
     return joints, float(ys.max() - ys.min())
@@ -146,7 +147,7 @@ def _rest_unit(skeleton: Skeleton) -> tuple[np.ndarray, float]:
 def map_bones(body: Body, skeleton: Skeleton) -> Int[np.ndarray, " B"]:
     """Each rig bone's skeleton joint (``-1``: none), by part names and rest positions (module
     docstring, step 1)."""
-    joints, _ = _rest_unit(skeleton)
+    joints, _ = rest_joints_and_height(skeleton)
     heads = np.asarray(body.heads, np.float64)
     rel_j = joints - joints[0]
     rel_b = (heads - heads[0]) * _leg_ratio(joints, heads)
@@ -278,7 +279,7 @@ def bind_body(body: Body, skeleton: Skeleton, forward: np.ndarray | None = None)
     (default ``+z``; :func:`jcrowd.motion.clip.rest_forward` gives it)."""
     jb = map_bones(body, skeleton)
     owner = _owner(body, jb)
-    joints, height = _rest_unit(skeleton)
+    joints, height = rest_joints_and_height(skeleton)
     rest = joints / height  # the model's skeletons are 1 m tall; others are normalised here
     heads = np.asarray(body.heads, np.float64)
     turn = _yaw_matrix(
@@ -309,7 +310,7 @@ def bind_body(body: Body, skeleton: Skeleton, forward: np.ndarray | None = None)
                 out[sel] += w[sel, k, None] * ((v[sel] - h0) @ lin.T + h1)
                 nout[sel] += w[sel, k, None] * (n[sel] @ np.linalg.inv(lin))
         nout /= np.maximum(np.linalg.norm(nout, axis=1, keepdims=True), 1e-12)
-        joint_ids, joint_w = _merge(jb[own], w)
+        joint_ids, joint_w = merge_influences(jb[own], w)
         main = np.asarray(mesh.bones, np.int64)[:, 0]  # the strongest rig bone (sorted)
         regions = np.array([_region(_part_of_bone(b)) for b in body.bones], np.int8)[main]
         meshes.append(
@@ -364,7 +365,7 @@ def _bone_maps(
     return maps
 
 
-def _merge(ids: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def merge_influences(ids: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per vertex, the entries for the same joint summed and the four largest kept, largest
     first (unused slots point at the main joint with weight 0), renormalised to sum to 1."""
     v = ids.shape[0]

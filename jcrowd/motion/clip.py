@@ -22,7 +22,7 @@ from jaxtyping import Float
 
 from jcrowd.errors import MotionError
 from jcrowd.motion.rotation import (
-    _xp,
+    array_module,
     quat_mul,
     quat_normalize,
     quat_rotate,
@@ -125,7 +125,7 @@ def resample(motion: Motion, fps: float) -> Motion:
     """
     if not fps > 0:
         raise MotionError(f"resample: expected a positive frame rate, found {fps}")
-    xp = _xp(motion.rotations)
+    xp = array_module(motion.rotations)
     n = int(np.floor(motion.duration * fps + 1e-6)) + 1
     t = np.arange(n) * (motion.fps / fps)  # positions in source frames
     i0 = np.clip(np.floor(t).astype(np.int64), 0, motion.num_frames - 1)
@@ -188,7 +188,7 @@ def rest_forward(skeleton: Skeleton) -> np.ndarray:
 def headings(motion: Motion) -> Any:
     """Heading (yaw about +Y, radians) of the root per frame; 0 means facing +Z."""
     fwd = rest_forward(motion.skeleton)
-    xp = _xp(motion.rotations)
+    xp = array_module(motion.rotations)
     return quat_yaw(motion.rotations[:, 0], xp.asarray(fwd, dtype=motion.rotations.dtype))
 
 
@@ -198,7 +198,7 @@ def normalize_root(motion: Motion) -> Motion:
     The root joint sits at ``root_position + offsets[0]``; the turn is about that point, so the
     clip moves rigidly whatever the root's offset.
     """
-    xp = _xp(motion.rotations, motion.root_positions)
+    xp = array_module(motion.rotations, motion.root_positions)
     yaw0 = headings(motion)[0]
     turn = yaw_quat(-yaw0)
     off0 = xp.asarray(motion.skeleton.offsets[0], dtype=motion.root_positions.dtype)
@@ -276,7 +276,7 @@ def mirror(motion: Motion) -> Motion:
             "mirror: expected left/right joint names (Left*/Right*, L*/R*, l*/r*), found none in "
             f"{list(motion.skeleton.names)}"
         )
-    xp = _xp(motion.rotations, motion.root_positions)
+    xp = array_module(motion.rotations, motion.root_positions)
     perm = mirror_map(motion.skeleton.names)
     sign_q = xp.asarray([1.0, 1.0, -1.0, -1.0], dtype=motion.rotations.dtype)
     sign_p = xp.asarray([-1.0, 1.0, 1.0], dtype=motion.root_positions.dtype)

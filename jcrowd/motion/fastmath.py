@@ -9,8 +9,8 @@ The method is the textbook one (Cody–Waite reduction, then minimax polynomials
 period):
 
 - ``k = round(x · 2/π)`` and ``r = x − k·π/2`` with ``π/2`` split into three float32 parts
-  (``1.5703125`` has 8 significant bits, so ``k · part₁`` is exact for ``|k| < 2¹⁶``), which
-  leaves ``|r| ≤ π/4``;
+  (the first, ``201/128``, has 8 significant bits, so ``k · part₁`` is exact for
+  ``|k| < 2¹⁶``), which leaves ``|r| ≤ π/4``;
 - ``sin r`` and ``cos r`` by the degree-7 and degree-8 minimax polynomials of the Cephes
   library's ``sinf``/``cosf`` (coefficients are numbers from that library; the code is this
   project's own);
@@ -34,7 +34,7 @@ __all__ = ["sincos"]
 
 _TWO_OVER_PI = np.float32(2.0 / np.pi)
 # π/2 = _PI2_A + _PI2_B + _PI2_C to about 2⁻⁷⁰ (Cody–Waite; twice Cephes's π/4 split).
-_PI2_A = np.float32(1.5703125)
+_PI2_A = np.float32(201 / 128)
 _PI2_B = np.float32(4.837512969970703125e-4)
 _PI2_C = np.float32(7.54978995489188216e-8)
 # Cephes sinf / cosf minimax coefficients on [−π/4, π/4].

@@ -55,7 +55,7 @@ EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
 
 
-def _xp(*arrays: Any) -> ModuleType:
+def array_module(*arrays: Any) -> ModuleType:
     """NumPy when every input is NumPy (or a plain number), else jax.numpy."""
     if all(isinstance(a, np.ndarray | np.generic | float | int) for a in arrays):
         return np
@@ -81,7 +81,7 @@ def quat_identity(shape: tuple[int, ...] = (), dtype: Any = jnp.float32) -> jnp.
 
 def quat_mul(a: Any, b: Any) -> Any:
     """Hamilton product ``a ⊗ b`` (apply ``b`` first, then ``a``). Shapes ``(..., 4)``."""
-    xp = _xp(a, b)
+    xp = array_module(a, b)
     aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
     bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
     return _stack(
@@ -97,7 +97,7 @@ def quat_mul(a: Any, b: Any) -> Any:
 
 def quat_conj(q: Any) -> Any:
     """Conjugate ``(w, -x, -y, -z)``."""
-    xp = _xp(q)
+    xp = array_module(q)
     return xp.concatenate([q[..., :1], -q[..., 1:]], axis=-1)
 
 
@@ -108,7 +108,7 @@ def quat_inv(q: Any) -> Any:
 
 def quat_normalize(q: Any, eps: float = 1e-12) -> Any:
     """Scale to unit length; a zero quaternion becomes the identity rather than NaN."""
-    xp = _xp(q)
+    xp = array_module(q)
     n = xp.sqrt(xp.sum(q * q, axis=-1, keepdims=True))
     ident = xp.zeros_like(q) + xp.asarray([1.0, 0.0, 0.0, 0.0], dtype=q.dtype)
     safe = xp.where(n > eps, n, 1.0)
@@ -117,13 +117,13 @@ def quat_normalize(q: Any, eps: float = 1e-12) -> Any:
 
 def quat_canonical(q: Any) -> Any:
     """The representative with ``w >= 0`` (``q`` and ``-q`` are the same rotation)."""
-    xp = _xp(q)
+    xp = array_module(q)
     return xp.where(q[..., :1] < 0, -q, q)
 
 
 def quat_rotate(q: Any, v: Any) -> Any:
     """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)``: ``R v``."""
-    xp = _xp(q, v)
+    xp = array_module(q, v)
     w = q[..., :1]
     u = q[..., 1:]
     t = 2.0 * xp.cross(u, v)
@@ -132,7 +132,7 @@ def quat_rotate(q: Any, v: Any) -> Any:
 
 def quat_to_matrix(q: Any) -> Any:
     """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``."""
-    xp = _xp(q)
+    xp = array_module(q)
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     rows = [
         [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
@@ -148,7 +148,7 @@ def quat_from_matrix(m: Any) -> Any:
     Shepperd's method: of the four candidate formulas, use the one whose pivot
     (``1 + trace`` or ``1 + 2 m_ii - trace``) is largest, so no division by a small number.
     """
-    xp = _xp(m)
+    xp = array_module(m)
     m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
     tr = m00 + m11 + m22
     pivots = xp.stack([1 + tr, 1 + 2 * m00 - tr, 1 + 2 * m11 - tr, 1 + 2 * m22 - tr], axis=-1)
@@ -198,7 +198,7 @@ def quat_from_matrix(m: Any) -> Any:
 
 def quat_from_axis_angle(axis: Any, angle: Any) -> Any:
     """Rotation by ``angle`` (radians) about unit ``axis`` ``(..., 3)``."""
-    xp = _xp(axis, angle)
+    xp = array_module(axis, angle)
     sin, cos = _sincos(xp, 0.5 * xp.asarray(angle)[..., None])
     return xp.concatenate([cos, sin * axis], axis=-1)
 
@@ -208,7 +208,7 @@ def quat_from_expmap(r: Any) -> Any:
 
     Uses ``sin(θ/2)/θ`` with its Taylor series near 0, so it is smooth (and differentiable) at 0.
     """
-    xp = _xp(r)
+    xp = array_module(r)
     # Written out, not xp.sum: XLA:CPU sends a 3-element reduce to a separate library kernel,
     # where a sum of products fuses with the work around it.
     theta2 = r[..., 0:1] * r[..., 0:1] + r[..., 1:2] * r[..., 1:2] + r[..., 2:3] * r[..., 2:3]
@@ -222,7 +222,7 @@ def quat_from_expmap(r: Any) -> Any:
 
 def quat_to_expmap(q: Any) -> Any:
     """Rotation vector ``axis * angle`` of ``q``; the angle is in ``[0, π]`` (``w >= 0`` side)."""
-    xp = _xp(q)
+    xp = array_module(q)
     q = quat_canonical(q)
     v = q[..., 1:]
     s2 = xp.sum(v * v, axis=-1, keepdims=True)
@@ -235,7 +235,7 @@ def quat_to_expmap(q: Any) -> Any:
 
 def quat_angle(a: Any, b: Any) -> Any:
     """Angle in radians ``[0, π]`` of the rotation taking ``b`` to ``a`` (sign-invariant)."""
-    xp = _xp(a, b)
+    xp = array_module(a, b)
     # 2·arccos|a·b| loses half the digits near 0 (float32: ~1e-3 rad error at small angles).
     # For unit a, b at 4-D angle Ω: |a - b| = 2 sin(Ω/2), |a + b| = 2 cos(Ω/2), so the rotation
     # angle 2Ω = 4·atan2(|a - b|, |a + b|), accurate everywhere.
@@ -252,7 +252,7 @@ def _safe_norm(xp: ModuleType, v: Any) -> Any:
 
 def quat_slerp(a: Any, b: Any, t: Any) -> Any:
     """Spherical linear interpolation from ``a`` (t=0) to ``b`` (t=1) along the short arc."""
-    xp = _xp(a, b, t)
+    xp = array_module(a, b, t)
     t = xp.asarray(t)
     if t.ndim < a.ndim:
         t = t[..., None]
@@ -275,7 +275,7 @@ def euler_to_quat(angles: Any, order: str) -> Any:
         order: one of :data:`EULER_ORDERS`, e.g. ``"ZYX"`` means ``R = Rz @ Ry @ Rx``.
     """
     order = _check_order(order)
-    xp = _xp(angles)
+    xp = array_module(angles)
     q = None
     for i, letter in enumerate(order):
         axis = np.zeros(3)
@@ -300,7 +300,7 @@ def quat_to_euler(q: Any, order: str) -> Any:
     whole rotation about the shared axis so that ``c ≈ 0``.
     """
     order = _check_order(order)
-    xp = _xp(q)
+    xp = array_module(q)
     i, j, k = (_AXIS[c] for c in order)
     s = 1.0 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
     m = quat_to_matrix(q)
@@ -332,7 +332,7 @@ def quat_yaw(q: Any, forward: Any = None) -> Any:
     ``forward`` is the rest-pose facing direction (default +Z). A positive yaw turns +Z towards
     +X, i.e. to the character's left when it faces +Z (right-handed, Y up).
     """
-    xp = _xp(q) if forward is None else _xp(q, forward)
+    xp = array_module(q) if forward is None else array_module(q, forward)
     if forward is None:
         forward = xp.asarray([0.0, 0.0, 1.0], dtype=q.dtype)
     f = quat_rotate(q, xp.broadcast_to(forward, (*q.shape[:-1], 3)))
@@ -341,7 +341,7 @@ def quat_yaw(q: Any, forward: Any = None) -> Any:
 
 def yaw_quat(yaw: Any) -> Any:
     """Rotation by ``yaw`` radians about +Y, ``(..., 4)``."""
-    xp = _xp(yaw)
+    xp = array_module(yaw)
     yaw = xp.asarray(yaw)
     zero = xp.zeros_like(yaw)
     sin, cos = _sincos(xp, 0.5 * yaw)

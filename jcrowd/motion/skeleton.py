@@ -26,7 +26,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from jcrowd.errors import SkeletonError
-from jcrowd.motion.rotation import _xp, quat_mul, quat_rotate
+from jcrowd.motion.rotation import array_module, quat_mul, quat_rotate
 
 __all__ = [
     "Skeleton",
@@ -188,7 +188,7 @@ def forward_kinematics(
         ``(global_rotations (*batch, J, 4), global_positions (*batch, J, 3))``; NumPy in gives
         NumPy out (float64 kept), otherwise jax arrays.
     """
-    xp = _xp(local_rotations, root_position, skeleton.offsets)
+    xp = array_module(local_rotations, root_position, skeleton.offsets)
     offsets = xp.asarray(skeleton.offsets, dtype=local_rotations.dtype)
     batch = local_rotations.shape[:-2]
     groups = skeleton.depth_groups
@@ -220,7 +220,7 @@ def end_site_positions(
     global_positions: Float[ArrayLike, "*batch J 3"],
 ) -> Float[ArrayLike, "*batch E 3"]:
     """World positions of the End Sites, ``(*batch, E, 3)``."""
-    xp = _xp(global_rotations, global_positions)
+    xp = array_module(global_rotations, global_positions)
     par = np.asarray(skeleton.end_parents, np.int64)
     eo = xp.asarray(skeleton.end_offsets_or_empty(), dtype=global_positions.dtype)
     batch = global_positions.shape[:-2]
@@ -263,7 +263,7 @@ def kept_ancestor_frame(
 
 def bone_lengths(skeleton: Skeleton) -> Float[ArrayLike, " J"]:
     """Length of each joint's offset from its parent (m); the root's entry is 0."""
-    xp = _xp(skeleton.offsets)
+    xp = array_module(skeleton.offsets)
     lengths = xp.sqrt(xp.sum(skeleton.offsets * skeleton.offsets, axis=-1))
     return xp.where(xp.arange(len(skeleton.parents)) == 0, 0.0, lengths)
 
@@ -272,7 +272,7 @@ def joint_bone_lengths(
     skeleton: Skeleton, positions: Float[ArrayLike, "*batch J 3"]
 ) -> Float[ArrayLike, "*batch J"]:
     """Distance from each joint to its parent in posed ``positions``; the root's entry is 0."""
-    xp = _xp(positions)
+    xp = array_module(positions)
     par = np.asarray(skeleton.parents, np.int64)
     par = np.where(par < 0, 0, par)
     d = positions - positions[..., par, :]

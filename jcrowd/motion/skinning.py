@@ -23,8 +23,14 @@ from typing import Any
 import numpy as np
 from jaxtyping import Float, Int
 
-from jcrowd.motion.body import INFLUENCES, BodyMesh, BoundBody, _merge, _rest_unit
-from jcrowd.motion.rotation import _xp, quat_rotate, quat_to_matrix
+from jcrowd.motion.body import (
+    INFLUENCES,
+    BodyMesh,
+    BoundBody,
+    merge_influences,
+    rest_joints_and_height,
+)
+from jcrowd.motion.rotation import array_module, quat_rotate, quat_to_matrix
 from jcrowd.motion.skeleton import Skeleton
 
 __all__ = [
@@ -67,7 +73,7 @@ def level_skin(
     local = rest_offsets(mesh, rest).astype(np.float64)
     rot = np.asarray(frame_rotation, np.float64)[ids]
     moved = quat_rotate(rot, local) + np.asarray(frame_position, np.float64)[ids]
-    new_ids, new_w = _merge(np.asarray(anchor, np.int64)[ids], w)
+    new_ids, new_w = merge_influences(np.asarray(anchor, np.int64)[ids], w)
     v = ids.shape[0]
     out = np.zeros((v, INFLUENCES, 3))
     for m in range(INFLUENCES):
@@ -92,7 +98,7 @@ def skin(
     a vertex's offset in its ``k``-th joint's frame (:func:`rest_offsets`, :func:`level_skin`),
     ``R_k, p_k`` that joint's global rotation and position (m), ``h`` the agent's height. NumPy
     in gives NumPy out, otherwise jax arrays."""
-    xp = _xp(rotations, positions)
+    xp = array_module(rotations, positions)
     h = xp.asarray(height, dtype=positions.dtype)[..., None, None, None]
     b = np.asarray(bones)
     moved = quat_rotate(rotations[..., b, :], h * xp.asarray(offsets, dtype=positions.dtype))
@@ -215,7 +221,7 @@ def skeleton_level(bound: BoundBody, skeleton: Skeleton) -> SkinnedLevel:
     j = skeleton.num_joints
     offsets = np.asarray(skeleton.offsets, np.float64)
     ends = np.asarray(skeleton.end_offsets_or_empty(), np.float64)
-    _, height = _rest_unit(skeleton)
+    _, height = rest_joints_and_height(skeleton)
     carried: list[list[tuple[int, np.ndarray]]] = [[] for _ in range(j)]
     for c, p in enumerate(skeleton.parents):
         if p >= 0:

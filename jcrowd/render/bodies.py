@@ -1,4 +1,4 @@
-"""Skinned bodies, blob shadows and the sky for :class:`~jcrowd.render.CrowdRenderer` (issue 20).
+"""Skinned bodies, blob shadows and the sky for :class:`~jcrowd.render.CrowdRenderer`.
 
 A level drawn as bodies (:class:`~jcrowd.motion.skinning.SkinnedLevel`) has every resolution of the
 body. Per frame the host finds each valid agent's kept-joint frames in the points the step
@@ -13,9 +13,9 @@ normal by ``Σ_k w_k R_k``. Each vertex has a clothing region (skin, top, bottom
 or ``(C, 3, 3)`` (skin, top, bottom).
 
 Why per agent: on a software rasteriser (llvmpipe, this project's CI and demo) a frame costs
-about what its triangles do, and a level is a band of distances, not of sizes on screen: the
-plaza demo at 960×540 took 326 ms per frame with level ``l`` drawing mesh ``l`` and 211 ms
-with mesh ``l + 1`` (2026-12-03), while a close-up needs the fine mesh at level 0.
+about what its triangles do, and a level is a band of distances, not of sizes on screen: a
+close-up needs the fine mesh at level 0, while most agents of a level are small enough for a
+coarser one (``docs/design/render.md`` has the plaza demo's frame times).
 
 Blob shadows: a soft dark disc on the ground under each body (radius 0.28 × height), drawn
 after the ground with blending. The sky: a gradient from the background colour at the horizon
@@ -60,10 +60,9 @@ SHADOW_RADIUS = 0.28
 MESH_PIXELS = (600.0, 250.0, 120.0, 60.0)
 """An agent at least ``MESH_PIXELS[m]`` pixels tall on screen is drawn with mesh ``m`` (finest
 first), a smaller one with the next; below the last, the coarsest. With the shipped body that
-is 5–12 triangles per pixel of height below 600 px. Measured on the plaza demo (960×540, 20
-frames, llvmpipe, 2026-12-03): thresholds (400, 100, 45, 22) drew 1.01 M triangles in 193 ms
-per frame, (400, 150, 70, 35) 0.76 M in 158 ms, these 0.64 M in 142 ms, with no difference we
-could see at 2× zoom."""
+is 5–12 triangles per pixel of height below 600 px: on the plaza demo these draw the fewest
+triangles of the thresholds compared in ``docs/design/render.md``, with no visible difference
+at 2× zoom."""
 
 BODY_VERTEX = """
 #version 330 core

@@ -170,7 +170,7 @@ class Source:
 
 @dataclass(frozen=True, eq=False)
 class LodSettings:
-    """Level-of-detail settings for the crowd step (issue 7; paper 000 §5.1).
+    """Level-of-detail settings for the crowd step (paper 000 §5.1).
 
     ``thresholds_m``: increasing distances (m); an agent farther than ``thresholds_m[i]`` is at
     level i + 1 or coarser, so there are ``len(thresholds_m) + 1`` levels. ``screen`` is the
@@ -225,8 +225,8 @@ class LodSettings:
 MAX_AVOID_COVER = 1.0 / 3.0
 """With ``[dynamics] avoid`` on, the share of a group's spawn region its agents' discs may cover.
 Placing discs at random two radii apart (:data:`~jcrowd.scenario.spawning.SPREAD_TRIES` draws
-each) starts to fail near 0.4: measured, 3 touching pairs among 320 agents of radius 0.2 m in
-10 m × 10 m (cover 0.40), none among 250 (cover 0.31). A third is 2.65 agents per m² at the
+each) starts to fail near 0.4: 320 agents of radius 0.2 m in 10 m × 10 m (cover 0.40) leave
+3 touching pairs, 250 (cover 0.31) none. A third is 2.65 agents per m² at the
 default radius, 6.3 at the entrance experiment's 0.13 m."""
 
 

@@ -3,7 +3,8 @@
 - :mod:`~jcrowd.simplify.analysis`: posture error, key posture, joint importance (Eq. 1–3);
 - :mod:`~jcrowd.simplify.levels`: frozen joints, level skeletons, the position problem (Eq. 5–8);
 - :mod:`~jcrowd.simplify.sqp`: the per-frame SQP with jaxopt QP subproblems;
-- :mod:`~jcrowd.simplify.pipeline`: :func:`simplify_motion` and rotation recovery.
+- :mod:`~jcrowd.simplify.pipeline`: :func:`simplify_motion`; :mod:`~jcrowd.simplify.recover`:
+  rotation recovery from the optimised positions.
 """
 
 from jcrowd.simplify.analysis import analyse_motion as analyse_motion

@@ -48,7 +48,7 @@ import numpy as np
 
 from jcrowd.errors import MotionError
 from jcrowd.motion.clip import Motion, left_right_pairs
-from jcrowd.motion.rotation import _xp, quat_rotate
+from jcrowd.motion.rotation import array_module, quat_rotate
 from jcrowd.motion.skeleton import Skeleton, rest_positions
 
 __all__ = [
@@ -126,7 +126,7 @@ def _child_vectors(skeleton: Skeleton, rotations: Any) -> tuple[Any, np.ndarray]
     NumPy in (the offline analysis, float64, no compilation per clip length) gives NumPy out;
     jax arrays give jax arrays.
     """
-    xp = _xp(rotations)
+    xp = array_module(rotations)
     owners, via, offsets = _child_table(skeleton)
     shape = (rotations.shape[0], len(owners), 3)
     v = xp.broadcast_to(xp.asarray(offsets, rotations.dtype), shape)
@@ -138,7 +138,7 @@ def _child_vectors(skeleton: Skeleton, rotations: Any) -> tuple[Any, np.ndarray]
 
 def _pair_error(v_ref: Any, v: Any) -> Any:
     """``(r(t_ref) + r(t)) θ`` for child vectors ``(..., C, 3)``; ``θ`` via atan2 (exact near 0)."""
-    xp = _xp(v_ref, v)
+    xp = array_module(v_ref, v)
     r_ref = xp.linalg.norm(v_ref, axis=-1)
     r = xp.linalg.norm(v, axis=-1)
     theta = xp.arctan2(xp.linalg.norm(xp.cross(v_ref, v), axis=-1), xp.sum(v_ref * v, axis=-1))
@@ -214,8 +214,8 @@ def elimination_order(skeleton: Skeleton, importance: np.ndarray) -> tuple[int, 
     mirrored pair (left and right names, :func:`jcrowd.motion.clip.left_right_pairs`) side by
     side, left first, at the larger of its two importances.
 
-    Why pairs (issue 21): on mirrored data the two importances of a pair are nearly equal, and
-    ranked apart the tie fell by noise, so a level kept one knee and froze the other. Ranked as
+    Why pairs: on mirrored data the two importances of a pair are nearly equal, and ranked
+    apart the tie falls by noise, so a level could keep one knee and freeze the other. Ranked as
     one at the larger importance, a pair goes only when neither side is needed; a level's cut
     then falls between pairs (:func:`jcrowd.simplify.levels.pair_safe_counts`).
     """

@@ -101,7 +101,7 @@ def joint_counts(num_joints: int, levels: int, lowest_fraction: float = 0.08) ->
 
 def pair_safe_counts(skeleton: Skeleton, order: tuple[int, ...], counts: list[int]) -> list[int]:
     """``counts`` moved so that no level keeps one joint of a mirrored pair and freezes the
-    other (issue 21): each level freezes a prefix of ``order`` (:func:`plan_level`) that ends
+    other: each level freezes a prefix of ``order`` (:func:`plan_level`) that ends
     between two pairs — the nearest such cut to the one asked for, the smaller on a tie, and
     past the level above's so the counts still fall strictly. Pairs must sit side by side in
     ``order`` (:func:`jcrowd.simplify.analysis.elimination_order` puts them so); a level that
@@ -194,11 +194,15 @@ def position_problem(skeleton: Skeleton, plan: LevelPlan, key: np.ndarray) -> Po
             if min(np.linalg.norm(a), np.linalg.norm(b)) > 1e-6:
                 triples.append((p, r, c))
     angles = np.asarray(triples, np.int64).reshape(-1, 3)
-    cos0 = np.asarray(_cosines(key_pos, angles)) if len(angles) else np.zeros(0)
+    cos0 = np.asarray(angle_cosines(key_pos, angles)) if len(angles) else np.zeros(0)
     return PositionProblem(bones, lengths, angles, cos0, skeleton.num_joints)
 
 
-def _cosines(pos: np.ndarray | jnp.ndarray, angles: np.ndarray) -> np.ndarray | jnp.ndarray:
+def angle_cosines(pos: np.ndarray | jnp.ndarray, angles: np.ndarray) -> np.ndarray | jnp.ndarray:
+    """Cosine of the angle at ``r`` of each ``(p, r, c)`` row of ``angles``; ``pos (..., J, 3)``.
+
+    NumPy in → NumPy out, JAX in → JAX out (the SQP residuals call it on traced positions).
+    """
     xp = jnp if isinstance(pos, jnp.ndarray) else np
     a = pos[..., angles[:, 0], :] - pos[..., angles[:, 1], :]
     b = pos[..., angles[:, 2], :] - pos[..., angles[:, 1], :]

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import lru_cache, partial
 from itertools import pairwise
 from typing import Any
 
@@ -30,9 +30,10 @@ from jcrowd.motion.clip import Motion
 from jcrowd.motion.skeleton import forward_kinematics
 from jcrowd.simplify.analysis import analyse_motion, elimination_order, key_posture
 from jcrowd.simplify.levels import (
+    LevelPlan,
     PositionProblem,
     Weights,
-    _cosines,
+    angle_cosines,
     joint_counts,
     pair_safe_counts,
     plan_level,
@@ -104,7 +105,7 @@ def _objective_and_constraints(problem: PositionProblem, mode: str, w: Weights) 
         parts = [jnp.zeros((0,), x.dtype)]
         pos = full(x)
         if len(angles):
-            parts.append(jnp.sqrt(w.gamma) * (_cosines(pos, angles) - cos0))
+            parts.append(jnp.sqrt(w.gamma) * (angle_cosines(pos, angles) - cos0))
         if mode == "weighted" and len(bones):
             d = pos[bones[:, 0]] - pos[bones[:, 1]]
             lengths = jnp.sqrt(jnp.sum(d * d, axis=-1) + 1e-18)
@@ -249,12 +250,45 @@ def simplify_motion(
         on_level: called with ``(level index, level)`` as each level is done (progress bars).
     """
     sk = motion.skeleton
+    counts = _checked_counts(motion, levels, order, counts, mode)
+    rot = np.asarray(motion.rotations, np.float64)
+    root = np.asarray(motion.root_positions, np.float64)
+    if not (np.all(np.isfinite(rot)) and np.all(np.isfinite(root))):
+        raise MotionError("simplify: the clip has NaN or infinite rotations or positions")
+    analysis = analyse_motion(motion)
+    order = order or elimination_order(sk, analysis.importance)
+    # A level keeps or freezes both joints of a mirrored pair.
+    counts = pair_safe_counts(sk, tuple(order), list(counts))
+    key = key_posture(motion, analysis.key_frames)
+    glob, pos = forward_kinematics(sk, rot, root)
+    solve = partial(solve_positions, mode=mode, weights=weights, max_iter=max_iter, tol=tol)
+    out = []
+    for count in counts:
+        plan = plan_level(sk, order, sk.num_joints - count, key)
+        level = _simplified_level(motion, plan, key, glob, pos, solve, count == sk.num_joints)
+        out.append(level)
+        if on_level is not None:
+            on_level(len(out) - 1, level)
+    return SimplifiedLevels(tuple(out), tuple(order), analysis.key_frames, analysis.importance)
+
+
+def _checked_counts(
+    motion: Motion,
+    levels: int,
+    order: tuple[int, ...] | None,
+    counts: list[int] | None,
+    mode: str,
+) -> list[int]:
+    """The joints per level (given or :func:`joint_counts`), every argument checked first.
+
+    A bad mode with one level, a count below 2 or an order that is not the non-root joints
+    would otherwise pass silently or fail deep inside.
+    """
+    sk = motion.skeleton
     if motion.num_frames < 2:
         raise MotionError(
             f"simplify: expected a clip of at least 2 frames, found {motion.num_frames}"
         )
-    # Every argument is checked before any work: a bad mode with one level, a count below 2 or
-    # an order that is not the non-root joints would otherwise pass silently or fail deep inside.
     if mode not in ("hard", "weighted"):
         raise MotionError(f"simplify: expected mode 'hard' or 'weighted', found {mode!r}")
     counts = counts or joint_counts(sk.num_joints, levels)
@@ -276,62 +310,62 @@ def simplify_motion(
             f"simplify: expected an elimination order listing each non-root joint "
             f"1..{sk.num_joints - 1} once, found {tuple(order)}"
         )
+    return counts
+
+
+def _simplified_level(
+    motion: Motion,
+    plan: LevelPlan,
+    key: np.ndarray,
+    glob: np.ndarray,
+    pos: np.ndarray,
+    solve: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray]],
+    full: bool,
+) -> SimplifiedLevel:
+    """One level: optimised positions (``solve``), recovered rotations and the level's errors.
+
+    ``glob``, ``pos``: the capture's global rotations and joint positions (forward kinematics
+    of the whole skeleton). A ``full`` level (nothing frozen) is the capture itself.
+    """
+    sk = motion.skeleton
     rot = np.asarray(motion.rotations, np.float64)
     root = np.asarray(motion.root_positions, np.float64)
-    if not (np.all(np.isfinite(rot)) and np.all(np.isfinite(root))):
-        raise MotionError("simplify: the clip has NaN or infinite rotations or positions")
-    analysis = analyse_motion(motion)
-    order = order or elimination_order(sk, analysis.importance)
-    # A level keeps or freezes both joints of a mirrored pair (issue 21).
-    counts = pair_safe_counts(sk, tuple(order), list(counts))
-    key = key_posture(motion, analysis.key_frames)
-    glob, pos = forward_kinematics(sk, rot, root)
     rel = pos - pos[:, :1]
-    out = []
-    for count in counts:
-        plan = plan_level(sk, order, sk.num_joints - count, key)
-        if count == sk.num_joints:
-            opt, iters, res = (
-                rel,
-                np.zeros(motion.num_frames, np.int32),
-                np.zeros(motion.num_frames, np.int32),
-            )
-        else:
-            problem = position_problem(sk, plan, key)
-            opt, iters, res = solve_positions(
-                problem, rel, mode=mode, weights=weights, max_iter=max_iter, tol=tol
-            )
-        problem = position_problem(sk, plan, key)
-        local = recover_rotations(plan, opt + pos[:, :1], glob) if count < sk.num_joints else rot
-        level_motion = Motion(
-            plan.skeleton, local.astype(np.float32), motion.root_positions, motion.fps
+    problem = position_problem(sk, plan, key)
+    if full:
+        opt, iters, res = (
+            rel,
+            np.zeros(motion.num_frames, np.int32),
+            np.zeros(motion.num_frames, np.int32),
         )
-        # Error over every joint of the original skeleton: frozen joints ride with their parent.
-        _, full_pos = forward_kinematics(sk, expand_rotations(plan, key, local, sk.parents), root)
-        err = np.linalg.norm(full_pos - pos, axis=-1)[:, 1:]
-        b = problem.bones
-        if len(b):
-            lengths = np.linalg.norm(opt[:, b[:, 0]] - opt[:, b[:, 1]], axis=-1)
-            var = (
-                np.abs(lengths - problem.bone_lengths)
-                / np.maximum(problem.bone_lengths, 1e-9)
-                * 100
-            )
-            var = var[:, problem.bone_lengths > 1e-6]
-        else:
-            var = np.zeros((1, 1))
-        level = SimplifiedLevel(
-            level_motion,
-            plan.kept,
-            float(err.mean()) if err.size else 0.0,
-            float(err.max()) if err.size else 0.0,
-            float(var.mean()) if var.size else 0.0,
-            float(var.max()) if var.size else 0.0,
-            iters,
-            res,
-            opt,
-        )
-        out.append(level)
-        if on_level is not None:
-            on_level(len(out) - 1, level)
-    return SimplifiedLevels(tuple(out), tuple(order), analysis.key_frames, analysis.importance)
+    else:
+        opt, iters, res = solve(problem, rel)
+    local = rot if full else recover_rotations(plan, opt + pos[:, :1], glob)
+    level_motion = Motion(
+        plan.skeleton, local.astype(np.float32), motion.root_positions, motion.fps
+    )
+    # Error over every joint of the original skeleton: frozen joints ride with their parent.
+    _, full_pos = forward_kinematics(sk, expand_rotations(plan, key, local, sk.parents), root)
+    err = np.linalg.norm(full_pos - pos, axis=-1)[:, 1:]
+    var = _bone_variation_pct(problem, opt)
+    return SimplifiedLevel(
+        level_motion,
+        plan.kept,
+        float(err.mean()) if err.size else 0.0,
+        float(err.max()) if err.size else 0.0,
+        float(var.mean()) if var.size else 0.0,
+        float(var.max()) if var.size else 0.0,
+        iters,
+        res,
+        opt,
+    )
+
+
+def _bone_variation_pct(problem: PositionProblem, opt: np.ndarray) -> np.ndarray:
+    """``|len − b(0)| / b(0)`` in % of the optimised positions, per frame and rigid bone."""
+    b = problem.bones
+    if not len(b):
+        return np.zeros((1, 1))
+    lengths = np.linalg.norm(opt[:, b[:, 0]] - opt[:, b[:, 1]], axis=-1)
+    var = np.abs(lengths - problem.bone_lengths) / np.maximum(problem.bone_lengths, 1e-9) * 100
+    return var[:, problem.bone_lengths > 1e-6]

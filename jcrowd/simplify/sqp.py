@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import equinox as eqx
@@ -115,64 +116,22 @@ def sqp_solve(
         curvature: ``(x, |λ|) ↦ Σ|λ_i| ∇²c_i`` if known in closed form; default ``jax.hessian``.
     """
     m = num_constraints
-    n = x0.shape[0]
+    pb = _Problem(
+        residuals,
+        constraints,
+        params,
+        m,
+        x0.shape[0],
+        jax.eval_shape(lambda y: residuals(y, params), x0).shape[0],
+        x0 if prior is None else prior,
+        prior_weight,
+        ridge,
+        curvature,
+    )
     qp = EqualityConstrainedQP(solve=_dense_solve, tol=1e-12)
 
-    def cons(x: jax.Array) -> jax.Array:
-        return constraints(x, params) if constraints is not None and m else jnp.zeros((0,), x.dtype)
-
-    anchor = x0 if prior is None else prior
-    k_res = jax.eval_shape(lambda y: residuals(y, params), x0).shape[0]
-    m_jac = jax.jacrev if m < n else jax.jacfwd  # fewer passes: one per output or per input
-    r_jac = jax.jacrev if k_res < n else jax.jacfwd
-
-    def objective(x: jax.Array) -> jax.Array:
-        r = residuals(x, params)
-        return jnp.sum(r * r) + prior_weight * jnp.sum((x - anchor) ** 2)
-
-    def constraint_curvature(x: jax.Array, lam_abs: jax.Array) -> jax.Array:
-        if curvature is not None:
-            return curvature(x, lam_abs)
-        return jax.hessian(lambda y: jnp.dot(lam_abs, cons(y)))(x)
-
-    def merit(x: jax.Array, rho: jax.Array) -> jax.Array:
-        return objective(x) + rho * jnp.sum(jnp.abs(cons(x)))
-
     def body(state: tuple) -> tuple:
-        x, lam, k, _, _ = state
-        r = residuals(x, params)
-        jr = r_jac(residuals)(x, params).reshape(k_res, n)
-        eye = jnp.eye(n, dtype=x.dtype)
-        g = 2.0 * jr.T @ r + 2.0 * prior_weight * (x - anchor)
-        hess = 2.0 * jr.T @ jr + (2.0 * prior_weight + ridge) * eye
-        if m:
-            hess = hess + constraint_curvature(x, jnp.abs(lam))
-        hess = 0.5 * (hess + hess.T)
-        c = cons(x)
-        if m:
-            a = m_jac(cons)(x)
-            sol = qp.run(params_obj=(hess, g), params_eq=(a, -c)).params
-            d, lam_new = sol.primal, sol.dual_eq
-        else:
-            d, lam_new = jnp.linalg.solve(hess, -g), lam
-        rho = 2.0 * jnp.max(jnp.abs(lam_new), initial=0.0) + 1.0
-        phi0 = merit(x, rho)
-        trials = jnp.stack([merit(x + s * d, rho) for s in _STEPS])
-        ok = trials < phi0 + 1e-12 * jnp.abs(phi0)
-        step = jnp.asarray(_STEPS, x.dtype)[jnp.argmax(ok)]
-        step = jnp.where(jnp.any(ok), step, _STEPS[-1])
-        x_new = x + step * d
-        finite = jnp.all(jnp.isfinite(x_new)) & jnp.all(jnp.isfinite(lam_new))
-        # Converged: the constraints hold and either the step or the objective's change is
-        # negligible (on flat, non-convex angle terms the step can creep while f stands still).
-        stalled = jnp.abs(objective(x_new) - objective(x)) <= 1e-7 * (1.0 + objective(x))
-        moved = jnp.max(jnp.abs(step * d))
-        done = ((moved < tol) | (stalled & (moved < 10 * tol))) & (
-            jnp.max(jnp.abs(cons(x_new)), initial=0.0) < tol
-        )
-        x_new = jnp.where(finite, x_new, x)
-        lam_new = jnp.where(finite, lam_new, lam)
-        return x_new, lam_new, k + 1, done, ~finite
+        return _iteration(pb, qp, tol, state)
 
     def cond(state: tuple) -> jax.Array:
         _, _, k, done, bad = state
@@ -184,3 +143,105 @@ def sqp_solve(
         bad, RESULT.NONFINITE, jnp.where(done, RESULT.CONVERGED, RESULT.MAX_ITERATIONS)
     )
     return SQPSolution(x, lam, code.astype(jnp.int32), k)
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """One problem's functions of ``x``, with ``params`` bound (used at trace time only).
+
+    ``n`` unknowns, ``m`` constraints, ``k_res`` residuals; ``anchor`` is the prior's centre.
+    """
+
+    residuals: Residuals
+    constraints: Constraints | None
+    params: Any
+    m: int
+    n: int
+    k_res: int
+    anchor: jax.Array
+    prior_weight: float
+    ridge: float
+    curvature: Callable[[jax.Array, jax.Array], jax.Array] | None
+
+    def cons(self, x: jax.Array) -> jax.Array:
+        if self.constraints is not None and self.m:
+            return self.constraints(x, self.params)
+        return jnp.zeros((0,), x.dtype)
+
+    def objective(self, x: jax.Array) -> jax.Array:
+        r = self.residuals(x, self.params)
+        return jnp.sum(r * r) + self.prior_weight * jnp.sum((x - self.anchor) ** 2)
+
+    def merit(self, x: jax.Array, rho: jax.Array) -> jax.Array:
+        """The ℓ1 merit function ``f + ρ‖c‖₁``."""
+        return self.objective(x) + rho * jnp.sum(jnp.abs(self.cons(x)))
+
+    def constraint_curvature(self, x: jax.Array, lam_abs: jax.Array) -> jax.Array:
+        """``Σ|λ_i| ∇²c_i``: the closed form when given, else ``jax.hessian``."""
+        if self.curvature is not None:
+            return self.curvature(x, lam_abs)
+        return jax.hessian(lambda y: jnp.dot(lam_abs, self.cons(y)))(x)
+
+
+def _gauss_newton(pb: _Problem, x: jax.Array, lam: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Gradient ``g`` and Hessian ``H`` of the subproblem at ``x``: ``2 JᵣᵀJᵣ``, the prior's
+    ``2wI``, the ridge and the constraints' ``|λ|``-weighted curvature, symmetrised."""
+    r_jac = jax.jacrev if pb.k_res < pb.n else jax.jacfwd  # one pass per output or per input
+    r = pb.residuals(x, pb.params)
+    jr = r_jac(pb.residuals)(x, pb.params).reshape(pb.k_res, pb.n)
+    eye = jnp.eye(pb.n, dtype=x.dtype)
+    g = 2.0 * jr.T @ r + 2.0 * pb.prior_weight * (x - pb.anchor)
+    hess = 2.0 * jr.T @ jr + (2.0 * pb.prior_weight + pb.ridge) * eye
+    if pb.m:
+        hess = hess + pb.constraint_curvature(x, jnp.abs(lam))
+    return g, 0.5 * (hess + hess.T)
+
+
+def _subproblem(
+    pb: _Problem,
+    qp: EqualityConstrainedQP,
+    x: jax.Array,
+    lam: jax.Array,
+    g: jax.Array,
+    hess: jax.Array,
+) -> tuple[jax.Array, jax.Array]:
+    """The step ``d`` and multipliers of the quadratic subproblem (Newton's step without
+    constraints, the multipliers then kept)."""
+    c = pb.cons(x)
+    if pb.m:
+        m_jac = jax.jacrev if pb.m < pb.n else jax.jacfwd
+        a = m_jac(pb.cons)(x)
+        sol = qp.run(params_obj=(hess, g), params_eq=(a, -c)).params
+        return sol.primal, sol.dual_eq
+    return jnp.linalg.solve(hess, -g), lam
+
+
+def _step_length(pb: _Problem, x: jax.Array, d: jax.Array, lam_new: jax.Array) -> jax.Array:
+    """The largest of ``_STEPS`` that lowers the merit (the smallest when none does), all
+    evaluated together so the loop stays branch-free under ``vmap``."""
+    rho = 2.0 * jnp.max(jnp.abs(lam_new), initial=0.0) + 1.0
+    phi0 = pb.merit(x, rho)
+    trials = jnp.stack([pb.merit(x + s * d, rho) for s in _STEPS])
+    ok = trials < phi0 + 1e-12 * jnp.abs(phi0)
+    step = jnp.asarray(_STEPS, x.dtype)[jnp.argmax(ok)]
+    return jnp.where(jnp.any(ok), step, _STEPS[-1])
+
+
+def _iteration(pb: _Problem, qp: EqualityConstrainedQP, tol: float, state: tuple) -> tuple:
+    """One SQP iteration on ``(x, λ, k, done, bad)``; a non-finite iterate is not taken."""
+    x, lam, k, _, _ = state
+    g, hess = _gauss_newton(pb, x, lam)
+    d, lam_new = _subproblem(pb, qp, x, lam, g, hess)
+    step = _step_length(pb, x, d, lam_new)
+    x_new = x + step * d
+    finite = jnp.all(jnp.isfinite(x_new)) & jnp.all(jnp.isfinite(lam_new))
+    # Converged: the constraints hold and either the step or the objective's change is
+    # negligible (on flat, non-convex angle terms the step can creep while f stands still).
+    stalled = jnp.abs(pb.objective(x_new) - pb.objective(x)) <= 1e-7 * (1.0 + pb.objective(x))
+    moved = jnp.max(jnp.abs(step * d))
+    done = ((moved < tol) | (stalled & (moved < 10 * tol))) & (
+        jnp.max(jnp.abs(pb.cons(x_new)), initial=0.0) < tol
+    )
+    x_new = jnp.where(finite, x_new, x)
+    lam_new = jnp.where(finite, lam_new, lam)
+    return x_new, lam_new, k + 1, done, ~finite
