@@ -18,10 +18,9 @@ everything (``jcrowd run --record all``), and measures from the recording:
   ``standing_share``: alive agent-frames standing (the step's ``stands``: the phase waiting at
   a double-support phase; ``0`` before the step had it);
   ``standing_skate_cm_per_frame``: the drawn feet of standing agent-frames (of slow ones in
-  recordings from before the step could stand), each foot's lower joint (ankle or toe) moving
-  horizontally per frame, mean over both feet; ``None`` ("—") when nobody stood two frames
-  running (until 2026-12-03 the slow frames stood in then, so the counter-flow rows' 1.1–1.7
-  cm were slow walkers' feet, not standing ones);
+  recordings without ``stands``), each foot's lower joint (ankle or toe) moving horizontally
+  per frame, mean over both feet; ``None`` ("—") when nobody stood two frames running (rows
+  of 2026-12-03 and earlier measured slow walkers' feet there instead);
   ``walking_in_place_share``: of the slow agent-frames, those whose gait phase advances at
   half the model's cadence or more (a walk at walking cadence while hardly moving).
 - ``pop_cm`` (p99) and ``pop_ratio`` (p99): at each level change of a drawn agent, the largest
