@@ -1,12 +1,10 @@
-"""The crowd step: buckets, jit, traces, clip hand-over continuity, paths, sharding."""
+"""The crowd step: buckets, jit, traces, clip hand-over continuity, paths, and two processes on
+one mesh. The step split over devices in one process is compared with one device in
+tests/test_split_devices.py (this module's ``SCENE``)."""
 
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
-import textwrap
 from dataclasses import replace
 
 import equinox as eqx
@@ -14,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from on_devices import run_on_devices
+from on_devices import finish, start_python
 
 from jcrowd import load_default_model
 from jcrowd.crowd import decode_coeffs, level_points, pose_from_coeffs, prepare, step
@@ -46,8 +44,24 @@ def model():
     return load_default_model()
 
 
-def _sim(model, count=24, **lod):
-    sim, state = prepare(parse_scenario(SCENE.format(count=count), "test.toml"), model)
+@pytest.fixture(scope="module")
+def prepared(model):
+    """``prepare`` of ``SCENE`` with ``count`` agents, once per count for the module (a prepare
+    builds the crowd model from the motion model: seconds); each call returns the simulation
+    and a copy of the first state, which a compiled step may donate."""
+    done = {}
+
+    def get(count):
+        if count not in done:
+            done[count] = prepare(parse_scenario(SCENE.format(count=count), "test.toml"), model)
+        sim, state = done[count]
+        return sim, jax.tree.map(jnp.copy, state)
+
+    return get
+
+
+def _sim(prepared, count=24, **lod):
+    sim, state = prepared(count)
     if lod:
         sim = replace(sim, config=replace(sim.config, **lod))
     return sim, state
@@ -62,16 +76,17 @@ def _run(sim, state, steps, fn=None):
     return state, frames
 
 
-def test_state_is_under_one_kilobyte_per_agent(model):
-    _, state = _sim(model, count=10)
+def test_state_is_under_one_kilobyte_per_agent(prepared):
+    """The state's arrays (every leaf's bytes, 10 agents) stay within 1 KiB per agent."""
+    _, state = _sim(prepared, count=10)
     nbytes = sum(x.nbytes for x in jax.tree.leaves(state))
     assert nbytes / 10 <= 1024
 
 
 @pytest.mark.slow
-def test_padded_buckets_equal_unpadded(model):
+def test_padded_buckets_equal_unpadded(prepared):
     """Capacities with room to spare (padding slots) give the same crowd as tight ones."""
-    sim, state = _sim(model)
+    sim, state = _sim(prepared)
     tight_state, tight = _run(sim, state, 8)
     hist = np.bincount(np.asarray(tight[0].level), minlength=7)
     roomy = tuple(int(c) + 5 for c in hist[:6])  # ≥ each level's count: no overflow either way
@@ -109,9 +124,9 @@ def test_decode_bucket_runs_only_the_chunks_that_hold_agents(cap, used, chunk):
 
 
 @pytest.mark.slow
-def test_chunked_step_equals_one_chunk(model):
+def test_chunked_step_equals_one_chunk(prepared):
     """Decoding buckets in chunks of 2 slots gives the crowd of one chunk per level."""
-    sim, state = _sim(model)
+    sim, state = _sim(prepared)
     whole_state, whole = _run(replace(sim, config=replace(sim.config, chunk=4096)), state, 6)
     part_state, part = _run(replace(sim, config=replace(sim.config, chunk=2)), state, 6)
     for a, b in zip(jax.tree.leaves(whole_state), jax.tree.leaves(part_state), strict=True):
@@ -126,8 +141,10 @@ def test_chunked_step_equals_one_chunk(model):
 
 
 @pytest.mark.slow
-def test_jit_equals_eager(model):
-    sim, state = _sim(model, count=6)
+def test_jit_equals_eager(prepared):
+    """Two steps of the compiled step equal the step run op by op (``disable_jit``): every
+    state leaf to rtol 1e-5, atol 2e-5."""
+    sim, state = _sim(prepared, count=6)
     eager = lambda s, v, dt: step(sim.crowd, sim.config, s, v, dt)  # noqa: E731
     with jax.disable_jit():
         s_eager, _ = _run(sim, state, 2, eager)
@@ -138,9 +155,9 @@ def test_jit_equals_eager(model):
 
 
 @pytest.mark.slow
-def test_frame_points_equal_direct_decode(model):
+def test_frame_points_equal_direct_decode(prepared):
     """A level-0 agent's drawn points are the synthesis of its (clip, phase) before the step."""
-    sim, state = _sim(model, count=8)
+    sim, state = _sim(prepared, count=8)
     _, frames = _run(sim, state, 1)
     frame = frames[0]
     slots, ok = np.asarray(frame.slots[0]), np.asarray(frame.valid[0])
@@ -155,9 +172,9 @@ def test_frame_points_equal_direct_decode(model):
     np.testing.assert_allclose(got, np.asarray(want), atol=1e-5)
 
 
-def test_traced_once_with_changing_level_histogram(model):
+def test_traced_once_with_changing_level_histogram(prepared):
     """200 steps with the camera pulling away: the histogram changes, the step compiles once."""
-    sim, state = _sim(model, count=40)
+    sim, state = _sim(prepared, count=40)
     fn = sim.compiled()
     hists = set()
     for i in range(200):
@@ -169,10 +186,10 @@ def test_traced_once_with_changing_level_histogram(model):
     assert fn._cache_size() == 1
 
 
-def test_clip_handover_is_continuous(model):
+def test_clip_handover_is_continuous(prepared):
     """Per-frame joint displacement of blended (level-0) agents at clip hand-overs stays within
     the 99th percentile of their within-clip displacements."""
-    sim, state = _sim(model, count=6, capacities=(6, 6, 6, 6, 6, 6), thresholds=(1e3,) * 5)
+    sim, state = _sim(prepared, count=6, capacities=(6, 6, 6, 6, 6, 6), thresholds=(1e3,) * 5)
     fn = sim.compiled()
     prev_pts, prev_tau = None, None
     inside, boundary = [], []
@@ -216,56 +233,6 @@ def test_path_with_corner_is_walked_and_open_path_ends(model):
     assert np.max(heading_steps) < np.deg2rad(10)
 
 
-SHARDED = textwrap.dedent(
-    """
-    import json, os, sys
-    import jax, jax.numpy as jnp, numpy as np
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
-    from jcrowd import load_default_model
-    from jcrowd.errors import JcrowdError
-    from jcrowd.scenario import parse_scenario
-    from jcrowd.crowd import in_agent_order, prepare, shard_state
-    text = sys.stdin.read()
-    sim, state = prepare(parse_scenario(text, "t.toml"), load_default_model())
-    fn = sim.compiled()
-    refused = None
-    if len(jax.devices()) > 1:
-        # A state split in contiguous blocks by hand is refused: the step's agent ids assume
-        # shard_state's interleaved blocks.
-        mesh = Mesh(np.array(jax.devices()), ("agents",))
-        by_hand = jax.tree.map(
-            lambda x: jax.device_put(x, NamedSharding(mesh, P("agents"))), state)
-        try:
-            fn(by_hand, sim.view_at(0.0), sim.dt)
-        except JcrowdError as e:
-            refused = str(e)
-    state = shard_state(state)
-    for i in range(5):
-        state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
-    out = {"devices": len(jax.devices()),
-           "shards": len(state.position.sharding.device_set),
-           "refused": refused,
-           "position": in_agent_order(state.position, state).tolist(),
-           "tau": in_agent_order(state.tau, state).tolist()}
-    print(json.dumps(out))
-    """
-)
-
-
-def _run_sharded(devices):
-    return run_on_devices(SHARDED, devices, SCENE.format(count=32), JAX_PLATFORMS="cpu")
-
-
-@pytest.mark.slow
-def test_sharded_over_four_devices_equals_one():
-    one, four = _run_sharded(1), _run_sharded(4)
-    assert four["devices"] == 4 and four["shards"] == 4
-    assert "shard_state" in four["refused"]
-    # Same float32 program partitioned over devices: reductions may reorder, 1e-5 (issue 7).
-    np.testing.assert_allclose(four["position"], one["position"], atol=1e-5)
-    np.testing.assert_allclose(four["tau"], one["tau"], atol=1e-5)
-
-
 def _free_port() -> int:
     import socket
 
@@ -277,45 +244,27 @@ def _free_port() -> int:
 @pytest.mark.slow
 def test_two_processes_on_loopback_equal_one_process(tmp_path):
     """`jcrowd run` as two processes (2 CPU devices each, one 4-device mesh over gloo) records
-    the same crowd as one process on one device."""
+    the same crowd as one process on one device (the oracle: positions and headings to 1e-5);
+    each prints exactly one JSON object, and the one-process run compiles its step once. The
+    one-device side stays a process of its own: the command is the thing compared."""
     scene = tmp_path / "s.toml"
     scene.write_text(SCENE.format(count=32))
-    base = [sys.executable, "-m", "jcrowd.cli", "run", str(scene), "--steps", "5", "--json"]
-    env = dict(os.environ, JAX_PLATFORMS="cpu")
-    single = subprocess.run(
-        [*base, "--out", str(tmp_path / "one.npz")],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=True,
-    )
-    assert json.loads(single.stdout)["recompiles"] == 0
-    env2 = dict(env, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    base = ["-m", "jcrowd.cli", "run", str(scene), "--steps", "5", "--json"]
+    single = finish(start_python([*base, "--out", str(tmp_path / "one.npz")], 1))
+    assert json.loads(single)["recompiles"] == 0
     port = _free_port()
+    multi = ["--coordinator", f"127.0.0.1:{port}", "--num-processes", "2", "--process-id"]
     procs = [
-        subprocess.Popen(
-            [
-                *base,
-                "--out",
-                str(tmp_path / "two.npz"),
-                "--coordinator",
-                f"127.0.0.1:{port}",
-                "--num-processes",
-                "2",
-                "--process-id",
-                str(i),
-            ],
-            env=env2,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
+        start_python([*base, "--out", str(tmp_path / "two.npz"), *multi, str(i)], 2)
         for i in range(2)
     ]
-    outs = [p.communicate(timeout=300) for p in procs]
-    for p, (out, err) in zip(procs, outs, strict=True):
-        assert p.returncode == 0, err[-2000:]
+    try:
+        outs = [finish(p, what=f"process {i} of 2") for i, p in enumerate(procs)]
+    finally:
+        for p in procs:  # the other one, if one failed: it would wait for its peer
+            if p.poll() is None:
+                p.kill()
+    for out in outs:
         assert json.loads(out)["agents"] == 32  # stdout holds exactly one JSON object
     one, two = np.load(tmp_path / "one.npz"), np.load(tmp_path / "two.npz")
     # Same float32 program over 4 devices in 2 processes: collectives may reorder sums, 1e-5.
@@ -324,12 +273,12 @@ def test_two_processes_on_loopback_equal_one_process(tmp_path):
 
 
 @pytest.mark.slow
-def test_detail_culling_turns_tiny_agents_into_walking_dots(model):
+def test_detail_culling_turns_tiny_agents_into_walking_dots(prepared):
     """Agents shorter on screen than ``min_pixels`` are dots: not synthesized, still walking,
     counted; with ``min_pixels = 0`` the same agents are synthesized."""
     # A 1.7 m agent 20–60 m from the camera is ~18–53 px tall at 720p with a 60° fov: a
     # 100 px threshold makes every agent in view a dot, 0 none.
-    sim, state = _sim(model, count=12, min_pixels=100.0)
+    sim, state = _sim(prepared, count=12, min_pixels=100.0)
     fn = sim.compiled(donate=False)
     view = sim.view_at(0.0)
     new, frame = fn(state, view, sim.dt)
@@ -349,8 +298,10 @@ def test_detail_culling_turns_tiny_agents_into_walking_dots(model):
 
 
 @pytest.mark.slow
-def test_agents_beyond_the_budget_become_dots_and_count_as_overflow(model):
-    sim, state = _sim(model, count=24, capacities=(1, 1, 1, 1, 1, 1), min_pixels=0.0)
+def test_agents_beyond_the_budget_become_dots_and_count_as_overflow(prepared):
+    """One slot per level: six agents are placed, the others in view (counted with room for
+    all 24, the oracle) are dots, and the overflow counts at least them."""
+    sim, state = _sim(prepared, count=24, capacities=(1, 1, 1, 1, 1, 1), min_pixels=0.0)
     view = sim.view_at(0.0)
     _, frame = sim.compiled(donate=False)(state, view, sim.dt)
     placed = sum(int(np.asarray(v).sum()) for v in frame.valid)
@@ -370,11 +321,11 @@ def _one_hot_rows(mix, samples):
 
 
 @pytest.mark.slow
-def test_next_clip_is_kriged_for_synthesized_agents_and_captured_for_the_rest(model):
+def test_next_clip_is_kriged_for_synthesized_agents_and_captured_for_the_rest(prepared):
     """Agents not synthesized choose the nearest captured cycle (one-hot weights); agents
     synthesized get the kriged clip (dense weights)."""
     for min_pixels, want_one_hot in ((1e9, True), (3.0, False)):
-        sim, state = _sim(model, min_pixels=min_pixels)
+        sim, state = _sim(prepared, min_pixels=min_pixels)
         s = sim.crowd.decoders.kriging.num_samples
         state, frames = _run(sim, state, 40)
         synthesized = np.asarray(frames[-1].level) < len(sim.config.capacities)
@@ -385,8 +336,10 @@ def test_next_clip_is_kriged_for_synthesized_agents_and_captured_for_the_rest(mo
         assert np.all(_one_hot_rows(nxt, s) == want_one_hot)
 
 
-def test_kriging_budget_defers_choices_and_counts_them(model):
-    sim, state = _sim(model, krige_budget=1)
+def test_kriging_budget_defers_choices_and_counts_them(prepared):
+    """A kriging budget of 1: at most one new kriged choice per step (``has_next`` read before
+    and after each step), and the choices left for later are counted (``deferred`` > 0)."""
+    sim, state = _sim(prepared, krige_budget=1)
     fn = sim.compiled(donate=False)
     before = np.asarray(state.has_next)
     deferred = 0
@@ -399,10 +352,10 @@ def test_kriging_budget_defers_choices_and_counts_them(model):
     assert deferred > 0
 
 
-def test_first_state_spreads_phases_and_no_choice_waits(model):
+def test_first_state_spreads_phases_and_no_choice_waits(prepared):
     """Phases cover the whole cycle, agents past its middle start with their next clip, and
     the step's default choice budget keeps up: no choice is deferred."""
-    sim, state = _sim(model, count=400)
+    sim, state = _sim(prepared, count=400)
     last = sim.crowd.frames - 1
     tau = np.asarray(state.tau)
     assert tau.min() < 0.1 * last and tau.max() > 0.9 * last
@@ -412,14 +365,14 @@ def test_first_state_spreads_phases_and_no_choice_waits(model):
 
 
 @pytest.mark.slow
-def test_step_compiles_without_state_copies_and_same_results(model):
+def test_step_compiles_without_state_copies_and_same_results(prepared):
     """With copy insertion's region analysis (CPU), the compiled step copies no donated state
     buffer, and the crowd is bit-for-bit the one compiled without the option."""
     from jcrowd.crowd import step_compiler_options
 
     if not step_compiler_options():
         pytest.skip("this XLA has no xla_cpu_copy_insertion_use_region_analysis option")
-    sim, state = _sim(model)
+    sim, state = _sim(prepared)
 
     def run(state, view, dt):  # the argument name fixes the HLO parameter names
         return step(sim.crowd, sim.config, state, view, dt)
@@ -438,10 +391,10 @@ def test_step_compiles_without_state_copies_and_same_results(model):
 
 
 @pytest.mark.slow
-def test_coarsest_level_cached_cores_match_direct_decode_across_clip_changes(model):
+def test_coarsest_level_cached_cores_match_direct_decode_across_clip_changes(prepared):
     """Every agent at the coarsest level for 50 steps (past its clip hand-over): each frame's
     points equal the decode of the agent's current clip computed from scratch."""
-    sim, state = _sim(model, thresholds=(0.1, 0.2, 0.3, 0.4, 0.5), refresh=24)
+    sim, state = _sim(prepared, thresholds=(0.1, 0.2, 0.3, 0.4, 0.5), refresh=24)
     lv = sim.crowd.decoders.levels[-1]
     fn = sim.compiled(donate=False)
     checked, handed_over = 0, 0
@@ -461,12 +414,12 @@ def test_coarsest_level_cached_cores_match_direct_decode_across_clip_changes(mod
 
 
 @pytest.mark.parametrize("k", [1, 3, 12])
-def test_waypoint_pick_by_selects_or_gather_equals_indexing(model, k, monkeypatch):
+def test_waypoint_pick_by_selects_or_gather_equals_indexing(prepared, k, monkeypatch):
     """Both ways of reading each agent's current waypoint (selects up to SELECT_WAYPOINTS,
     a gather beyond) equal NumPy fancy indexing, exactly (no arithmetic)."""
     import jcrowd.crowd.steering as steering
 
-    _, state = _sim(model, count=10)
+    _, state = _sim(prepared, count=10)
     rng = np.random.default_rng(k)
     wps = jnp.asarray(rng.uniform(-50, 50, (10, k, 2)), jnp.float32)
     wp = jnp.asarray(rng.integers(0, k, 10), jnp.int32)

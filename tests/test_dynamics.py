@@ -1,5 +1,6 @@
 """The pedestrian step (jcrowd.pedestrians.step): safety on a bottleneck run, exits, passing,
-overflow, walls from geometry, and transformations (jit == eager)."""
+overflow, walls from geometry, and transformations (jit == eager). The step split over two
+devices is compared with one device in tests/test_split_devices.py."""
 
 from __future__ import annotations
 
@@ -8,7 +9,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import shapely
-from on_devices import run_on_devices
 
 from jcrowd.errors import JcrowdError
 from jcrowd.pedestrians import (
@@ -130,44 +130,3 @@ def test_walls_are_the_walkable_boundary_and_bad_worlds_are_errors():
         build_world(area, [shapely.box(3, 3, 4, 4), shapely.box(1.2, 1.2, 1.8, 1.8)])
     with pytest.raises(JcrowdError, match="expected a walkable area"):
         build_world(shapely.Polygon(), [shapely.box(0, 0, 1, 1)])
-
-
-SPLIT_SCRIPT = """
-import json
-import numpy as np, jax, jax.numpy as jnp, shapely
-from jcrowd.pedestrians import AvoidanceParams, Pedestrians, build_world, split_pedestrian_step
-room = shapely.box(0.0, 0.0, 6.0, 6.0)
-area = shapely.union(room, shapely.box(2.5, 6.0 - 1e-9, 3.5, 9.0))
-world = build_world(area, [shapely.box(2.5, 8.5, 3.5, 9.0)])
-xs = np.arange(0.5, 5.5, 0.6)
-pts = np.stack(np.meshgrid(xs, np.arange(0.5, 5.0, 0.6)), -1).reshape(-1, 2)[:40]
-n = len(pts)
-peds = Pedestrians(jnp.asarray(pts, jnp.float32), jnp.zeros(n, jnp.int32),
-                   jnp.full(n, 1.34, jnp.float32), jnp.full(n, 0.2, jnp.float32),
-                   jnp.ones(n, bool), VELOCITY)
-step = split_pedestrian_step()
-left = []
-for _ in range(200):
-    peds, info = step(AvoidanceParams(), world, peds, jnp.float32(1 / 30))
-    left.append(int(np.sum(np.asarray(info.arrived))))
-print(json.dumps({"pos": np.asarray(peds.position).tolist(),
-                  "alive": np.asarray(peds.alive).tolist(), "left": left,
-                  "devices": jax.device_count()}))
-"""
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize(
-    "velocity", ["None", "jnp.zeros((n, 2), jnp.float32)"], ids=["plain", "anticipating"]
-)
-def test_split_over_two_devices_equals_one_device(velocity):
-    """split_pedestrian_step on 2 devices (blocks of 20, neighbours — and, anticipating, their
-    velocities — through the all-gather) equals it on 1 device: same agents out at the same
-    steps, positions to 1e-4 m after 200 steps of a jammed bottleneck (float32 sums in another
-    order, grown over the steps)."""
-    script = SPLIT_SCRIPT.replace("VELOCITY", velocity)
-    out = {k: run_on_devices(script, k) for k in (1, 2)}
-    assert out[1]["devices"] == 1 and out[2]["devices"] == 2
-    assert out[2]["left"] == out[1]["left"] and sum(out[1]["left"]) > 0
-    assert out[2]["alive"] == out[1]["alive"]
-    np.testing.assert_allclose(out[2]["pos"], out[1]["pos"], atol=1e-4)

@@ -4,7 +4,9 @@ Oracle: the split step on ``K`` devices equals the one-device step run on each d
 of agents (agents ``k, k + K, …``: :func:`~jcrowd.crowd.devices.agent_order`) separately with
 :func:`~jcrowd.crowd.devices.per_device_config`'s share of the budget, the blocks' frames joined
 with agent ids and the counters summed — including when the budget binds. When it does not bind, it
-also equals the one-device step on the whole crowd.
+also equals the one-device step on the whole crowd. Both sides run in one child Python on 2 CPU
+devices (tests/on_devices.py: the one-device side is the one-device process's program, run on
+the first device).
 
 Tolerance 1e-5 (m, and aligned frames for τ): the same float32 program per agent; XLA may
 fuse or order a block's arithmetic differently from the whole crowd's.
@@ -13,10 +15,6 @@ fuse or order a block's arithmetic differently from the whole crowd's.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
-import textwrap
 from dataclasses import replace
 from types import SimpleNamespace
 
@@ -24,6 +22,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from on_devices import run_child
 
 from jcrowd.crowd import StepConfig, agent_order, in_agent_order, per_device_config
 
@@ -47,79 +46,11 @@ spawn = { shape = "rect", center = [0, 20], size = [40, 40] }
 path = { waypoints = [[0, 60], [60, 60]], loop = false }
 """
 
-SCRIPT = textwrap.dedent(
-    """
-    import json, sys
-    from dataclasses import replace
-    import jax, jax.numpy as jnp, numpy as np
-    from jcrowd import load_default_model
-    from jcrowd.scenario import parse_scenario
-    from jcrowd.crowd import in_agent_order, per_device_config, prepare, shard_state
-    mode, caps, text = sys.argv[1], json.loads(sys.argv[2]), sys.stdin.read()
-    sim, state = prepare(parse_scenario(text, "t.toml"), load_default_model())
-    if caps:
-        sim = replace(sim, config=replace(sim.config, capacities=tuple(caps)))
-    n, steps = state.num_agents, 6
 
-    def run(sim, state):
-        fn = sim.compiled()
-        for i in range(steps):
-            state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
-        return state, frame
-
-    def record(state, frame, ids, n_total):
-        # Per-agent arrays in agent order (ids[i]: the agent at row i), points keyed by agent id.
-        pts = {}
-        for lv, (s, ok, p) in enumerate(zip(frame.slots, frame.valid, frame.points)):
-            s, ok, p = np.asarray(s), np.asarray(ok), np.asarray(p)
-            assert (s[~ok] == n_total).all()
-            for i in np.flatnonzero(ok):
-                pts[str(int(ids[int(s[i])]))] = [lv, p[i].tolist()]
-        per = {k: in_agent_order(v, state) for k, v in
-               (("x", state.x), ("tau", state.tau), ("level", frame.level), ("dots", frame.dots))}
-        return {**{k: v.tolist() for k, v in per.items()}, "overflow": int(frame.overflow),
-                "deferred": int(frame.deferred), "points": pts}
-
-    everyone = np.arange(n)
-    if mode == "split":
-        state, frame = run(sim, shard_state(state))
-        out = record(state, frame, everyone, n)
-        out["devices"] = len(jax.devices())
-        out["shards"] = len(state.x.sharding.device_set)
-    elif mode == "whole":
-        out = record(*run(sim, state), everyone, n)
-    else:  # "blocks": the one-device step on each device's agents with its share of the budget
-        sim_b = replace(sim, config=per_device_config(sim.config, 2))
-        out = {k: [None] * n for k in ("x", "tau", "level", "dots")}
-        out.update(overflow=0, deferred=0, points={})
-        for b in range(2):
-            ids = everyone[b::2]  # agents b, b + 2, ... (agent_order)
-            part = record(*run(sim_b, jax.tree.map(lambda x: x[ids], state)), ids, n // 2)
-            for k in ("x", "tau", "level", "dots"):
-                for i, v in zip(ids, part[k]):
-                    out[k][i] = v
-            out["overflow"] += part["overflow"]
-            out["deferred"] += part["deferred"]
-            out["points"].update(part["points"])
-    print(json.dumps(out))
-    """
-)
-
-
-def _run(mode: str, devices: int, caps: list[int] | None = None, scene: str = SCENE) -> dict:
-    env = dict(os.environ, JAX_PLATFORMS="cpu")
-    env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
-    out = subprocess.run(
-        [sys.executable, "-c", SCRIPT, mode, json.dumps(caps or [])],
-        input=scene,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    if out.returncode:
-        pytest.fail(out.stderr[-3000:])
-    return json.loads(out.stdout.strip().splitlines()[-1])
+def _run(reference: str, caps: list[int] | None = None, scene: str = SCENE) -> dict:
+    """The split over 2 devices and ``reference`` (``whole`` or ``blocks``) on one device, in
+    one child process (:func:`on_devices.per_device_task`)."""
+    return run_child("per_device", 2, reference, json.dumps(caps or []), stdin=scene)
 
 
 def _same(a: dict, b: dict) -> None:
@@ -135,9 +66,14 @@ def _same(a: dict, b: dict) -> None:
 
 @pytest.mark.slow
 def test_split_equals_blocks_when_the_budget_binds() -> None:
+    """With far fewer near slots than agents (overflow > 0), the split step on 2 devices equals
+    each device's block stepped alone with its share of the budget: same levels, dots,
+    counters and drawn agents, positions, phases and points to 1e-5; every placed agent is
+    drawn once."""
     caps = [2, 2, 2, 2, 4, 48]  # far fewer near slots than the 48 agents 0–40 m away want
-    split, blocks = _run("split", 2, caps), _run("blocks", 1, caps)
-    assert split["devices"] == 2 and split["shards"] == 2
+    out = _run("blocks", caps)
+    split, blocks = out["split"], out["reference"]
+    assert out["devices"] == 2 and out["shards"] == 2
     assert split["overflow"] > 0  # the case this test is for
     _same(split, blocks)
     levels = np.asarray(split["level"])
@@ -147,7 +83,11 @@ def test_split_equals_blocks_when_the_budget_binds() -> None:
 
 @pytest.mark.slow
 def test_split_equals_whole_crowd_when_nothing_overflows() -> None:
-    split, whole = _run("split", 2), _run("whole", 1)
+    """With the scenario's capacities (nothing overflows on one device) the split step on 2
+    devices equals the whole crowd on one device, as :func:`_same` compares."""
+    out = _run("whole")
+    split, whole = out["split"], out["reference"]
+    assert out["devices"] == 2 and out["shards"] == 2
     assert whole["overflow"] == 0
     _same(split, whole)
 
@@ -186,7 +126,9 @@ def test_grouped_near_agents_fill_the_near_levels_as_on_one_device() -> None:
     (64 slots each: a share is at least one 64-slot chunk) place 128, all near agents. In
     contiguous blocks all 200 near agents would sit on device 0, which would place 64."""
     caps = [100, 100, 100, 100, 200, 400]
-    split, whole = _run("split", 2, caps, GROUPED), _run("whole", 1, caps, GROUPED)
+    out = _run("whole", caps, GROUPED)
+    split, whole = out["split"], out["reference"]
+    assert out["devices"] == 2 and out["shards"] == 2
     level0 = [sum(1 for v in run["level"] if v == 0) for run in (split, whole)]
     assert level0 == [128, 100]
     assert {int(k) for k, (lv, _) in split["points"].items() if lv == 0} <= set(range(200))

@@ -4,12 +4,11 @@ Oracles: closed forms for a source's appearance times; interval partitioning for
 (for one group the greedy plan needs exactly as many slots as windows overlap at the busiest
 instant, counted by a sweep); a per-slot Python loop for ``spawn_due``; and the end-to-end
 contract checked from outside the step — every source agent appears once, not before its time,
-where its source is, and the step compiles once.
+where its source is, and the step compiles once. The split over two devices is compared with one
+device in tests/test_split_devices.py (this module's ``SCENE``).
 """
 
 from __future__ import annotations
-
-import textwrap
 
 import jax
 import jax.numpy as jnp
@@ -17,7 +16,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from on_devices import run_on_devices
 
 from jcrowd import load_default_model
 from jcrowd.crowd import prepare
@@ -232,31 +230,3 @@ def test_a_group_of_zero_needs_a_source():
     alone = text[: text.index("[[sources]]")]
     with pytest.raises(ScenarioError, match=r"t: groups\[0\]\.count: expected a positive integ"):
         parse_scenario(alone, "t")
-
-
-SCRIPT = textwrap.dedent(
-    """
-    import json, sys
-    from jcrowd import load_default_model
-    from jcrowd.scenario import parse_scenario
-    from jcrowd.crowd import in_agent_order, prepare, shard_state
-    sim, state = prepare(parse_scenario(sys.stdin.read(), "t.toml"), load_default_model())
-    state = shard_state(state)
-    fn = sim.compiled()
-    for i in range(sim.steps):
-        state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
-    print(json.dumps({k: in_agent_order(getattr(state, k), state).tolist()
-                      for k in ("x", "z", "agent", "alive")}))
-    """
-)
-
-
-@pytest.mark.slow
-def test_split_over_two_devices_equals_one_device():
-    """Each device fills its own block's slots: same slots, agents and positions (to 1e-4 m
-    after 80 avoiding steps, as tests/test_steering.py) as on one device."""
-    text = SCENE.format(duration=8, avoid="true", count=4)
-    out = {k: run_on_devices(SCRIPT, k, text) for k in (1, 2)}
-    assert out[2]["agent"] == out[1]["agent"] and out[2]["alive"] == out[1]["alive"]
-    np.testing.assert_allclose(out[2]["x"], out[1]["x"], atol=1e-4)
-    np.testing.assert_allclose(out[2]["z"], out[1]["z"], atol=1e-4)

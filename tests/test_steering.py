@@ -2,19 +2,16 @@
 
 Oracles: closed forms for the heading and aim rules; for the stepped crowd, the step's own
 contract checked from outside — the root moves by the reported velocity times dt, nobody comes
-closer than the discs allow (the same scene without avoidance does overlap), the split over two
-devices equals one device (subprocesses, as tests/test_per_device.py).
+closer than the discs allow (the same scene without avoidance does overlap). The split over two
+devices is compared with one device in tests/test_split_devices.py (this module's ``COUNTERFLOW``
+with ``PILLAR``).
 """
 
 from __future__ import annotations
 
-import textwrap
-
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from on_devices import run_on_devices
 
 from jcrowd import load_default_model
 from jcrowd.crowd import aim_point, prepare, turn_towards
@@ -113,40 +110,6 @@ shape = "circle"
 center = [0.5, 0]
 radius = 1.2
 """
-
-SCRIPT = textwrap.dedent(
-    """
-    import json, sys
-    import numpy as np
-    from jcrowd import load_default_model
-    from jcrowd.scenario import parse_scenario
-    from jcrowd.crowd import in_agent_order, prepare, shard_state
-    sim, state = prepare(parse_scenario(sys.stdin.read(), "t.toml"), load_default_model())
-    state = shard_state(state)
-    fn = sim.compiled()
-    for i in range(40):
-        state, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
-    print(json.dumps({"x": in_agent_order(state.x, state).tolist(),
-                      "z": in_agent_order(state.z, state).tolist()}))
-    """
-)
-
-
-@pytest.mark.slow
-def test_split_over_two_devices_equals_one_device():
-    """Neighbours on the other device are seen through the all-gather (with anticipation,
-    their velocities too): same crowd to 1e-4 m after 40 steps (float32; XLA may order a
-    block's sums differently, and 40 steps of avoidance let a 1e-6 difference grow). A pillar
-    between the groups puts the scene's navigation fields and walls (jcrowd.pedestrians.scene) under
-    the split too. The anticipation model only: it gathers positions and velocities, the
-    collision-free speed model positions alone; both models' gathers are compared split and
-    whole in tests/test_dynamics.py (each crowd-step run here is a ~45 s compile)."""
-    text = COUNTERFLOW.format(avoid="true", model="anticipation") + PILLAR
-    out = {k: run_on_devices(SCRIPT, k, text) for k in (1, 2)}
-    np.testing.assert_allclose(out[2]["x"], out[1]["x"], atol=1e-4)
-    np.testing.assert_allclose(out[2]["z"], out[1]["z"], atol=1e-4)
-    assert jax.device_count() >= 1
-
 
 PATH_SCENE = """
 seed = 1
