@@ -1,4 +1,5 @@
-"""Shared test fixtures: where the CMU captures are, and strict JAX settings.
+"""Shared test fixtures: where the CMU captures are, strict JAX settings, the cmu16 tensor fit
+once per run, and the GL context of the tests that draw.
 
 Tests that need the captures take the ``cmu_dir`` / ``cmu16_dir`` fixtures. They look at
 ``$JCROWD_DATA`` (the folder holding ``cmu/`` and ``cmu16/``, or ``cmu/`` itself) and then at
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -130,6 +132,24 @@ def cmu16_tensor(cmu16_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> A
         failed.write_text(repr(exc))
         raise
     return model
+
+
+@pytest.fixture(scope="module")
+def gl_context() -> Iterator[Any]:
+    """One headless GL context (``jcrowd.render.make_context``) per test module that draws."""
+    from jcrowd.render import make_context
+
+    context = make_context()
+    yield context
+    context.release()
+
+
+@pytest.fixture
+def ctx(gl_context: Any) -> Iterator[Any]:
+    """The module's GL context; after the test, its error flag must be ``GL_NO_ERROR`` (a
+    drawing call that failed quietly fails the test that made it)."""
+    yield gl_context
+    assert gl_context.error == "GL_NO_ERROR"
 
 
 def all_clip_paths() -> list[Path]:

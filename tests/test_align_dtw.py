@@ -3,13 +3,13 @@ multiscale against exact on CMU walks, errors."""
 
 from __future__ import annotations
 
-from functools import cache
 from pathlib import Path
 
 import numpy as np
 import pytest
 from dtaidistance import dtw as dtai_dtw
 from dtaidistance import dtw_ndim
+from helpers import load_clip
 
 from jcrowd.align import (
     AlignError,
@@ -22,13 +22,7 @@ from jcrowd.align import (
     pose_features,
 )
 from jcrowd.align.multiscale import project_path
-from jcrowd.io import read_bvh
-from jcrowd.motion import Motion, drop_tpose_frames
-
-
-@cache
-def _clip(path: Path) -> Motion:
-    return drop_tpose_frames(read_bvh(path))[0]
+from jcrowd.motion import Motion
 
 
 def _loop_dtw(c: np.ndarray, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> float:
@@ -255,10 +249,10 @@ def test_multiscale_on_random_walk_signals() -> None:
 def _pairs(cmu_dir: Path, cmu16_dir: Path) -> list[tuple[Motion, Motion]]:
     walk = cmu_dir / "walk"
     return [
-        (_clip(walk / "07_01.bvh"), _clip(walk / "08_03.bvh")),
-        (_clip(walk / "02_01.bvh"), _clip(walk / "07_05.bvh")),
-        (_clip(cmu16_dir / "16_15.bvh"), _clip(cmu16_dir / "16_16.bvh")),
-        (_clip(cmu16_dir / "16_11.bvh"), _clip(cmu16_dir / "16_33.bvh")),
+        (load_clip(walk / "07_01.bvh"), load_clip(walk / "08_03.bvh")),
+        (load_clip(walk / "02_01.bvh"), load_clip(walk / "07_05.bvh")),
+        (load_clip(cmu16_dir / "16_15.bvh"), load_clip(cmu16_dir / "16_16.bvh")),
+        (load_clip(cmu16_dir / "16_11.bvh"), load_clip(cmu16_dir / "16_33.bvh")),
     ]
 
 

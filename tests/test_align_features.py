@@ -3,11 +3,11 @@ clip is and which way it heads, closed-form COM accelerations, finiteness on eve
 
 from __future__ import annotations
 
-from functools import cache
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import load_clip64
 
 from jcrowd.align import (
     DE_LEVA_MALE,
@@ -18,11 +18,9 @@ from jcrowd.align import (
 )
 from jcrowd.align.features import GRAVITY, to_heading_frame
 from jcrowd.errors import MotionError
-from jcrowd.io import read_bvh
 from jcrowd.motion import (
     Motion,
     Skeleton,
-    drop_tpose_frames,
     headings,
     joint_positions,
     quat_mul,
@@ -32,20 +30,8 @@ from jcrowd.motion import (
 )
 
 
-@cache
-def _clip(path: Path) -> Motion:
-    m = drop_tpose_frames(read_bvh(path))[0]
-    rot = np.asarray(m.rotations, np.float64)
-    return Motion(
-        m.skeleton,
-        rot / np.linalg.norm(rot, axis=-1, keepdims=True),  # float64 unit quaternions
-        np.asarray(m.root_positions, np.float64),
-        m.fps,
-    )
-
-
 def _both(cmu_dir: Path, cmu16_dir: Path) -> list[Motion]:
-    return [_clip(cmu_dir / "walk" / "07_01.bvh"), _clip(cmu16_dir / "16_15.bvh")]
+    return [load_clip64(cmu_dir / "walk" / "07_01.bvh"), load_clip64(cmu16_dir / "16_15.bvh")]
 
 
 def _moved(m: Motion, yaw: float, shift: np.ndarray) -> Motion:
@@ -128,7 +114,7 @@ def test_features_ignore_floor_position_and_heading(
 
 
 def test_pose_features_are_the_heading_frame_point_cloud(cmu_dir: Path) -> None:
-    m = _clip(cmu_dir / "walk" / "07_01.bvh")
+    m = load_clip64(cmu_dir / "walk" / "07_01.bvh")
     feats = pose_features(m)
     pos = np.asarray(joint_positions(m))
     assert feats.shape == (m.num_frames, 3 * m.skeleton.num_joints)
@@ -156,7 +142,7 @@ def test_pose_features_are_the_heading_frame_point_cloud(cmu_dir: Path) -> None:
 def test_com_acceleration_of_a_pushed_clip(cmu_dir: Path) -> None:
     """Adding ``v t + ½ a t²`` to the root adds exactly ``a`` (in g, heading frame) to the COM
     acceleration away from the ends; momenta about the COM do not change (relative velocities)."""
-    m = _clip(cmu_dir / "walk" / "07_01.bvh")
+    m = load_clip64(cmu_dir / "walk" / "07_01.bvh")
     t = np.arange(m.num_frames)[:, None] / m.fps
     v, a = np.array([0.5, 0.0, -1.0]), np.array([0.3, -0.2, 0.8])
     pushed = Motion(m.skeleton, m.rotations, m.root_positions + v * t + 0.5 * a * t**2, m.fps)
@@ -173,7 +159,7 @@ def test_physics_features_finite_on_every_walk(cmu_dir: Path, cmu16_dir: Path) -
     paths = sorted((cmu_dir / "walk").glob("*.bvh")) + sorted(cmu16_dir.glob("*.bvh"))
     assert len(paths) == 26 + 22
     for path in paths:
-        m = _clip(path)
+        m = load_clip64(path)
         f = physics_features(m)
         assert f.shape == (m.num_frames, 15), path.name
         assert np.all(np.isfinite(f)), path.name
@@ -187,7 +173,7 @@ def test_physics_features_finite_on_every_walk(cmu_dir: Path, cmu16_dir: Path) -
 
 
 def test_physics_features_reject_bad_arguments(cmu_dir: Path) -> None:
-    m = _clip(cmu_dir / "walk" / "07_01.bvh")
+    m = load_clip64(cmu_dir / "walk" / "07_01.bvh")
     with pytest.raises(MotionError, match="about"):
         physics_features(m, about="world")  # type: ignore[arg-type]
     with pytest.raises(MotionError, match="at least 3 frames"):

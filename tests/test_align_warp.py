@@ -3,11 +3,11 @@ time-stretch of a captured walk."""
 
 from __future__ import annotations
 
-from functools import cache
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import load_clip
 
 from jcrowd.align import (
     AlignError,
@@ -22,13 +22,6 @@ from jcrowd.align import (
     warp_from_increments,
     warp_increments,
 )
-from jcrowd.io import read_bvh
-from jcrowd.motion import Motion, drop_tpose_frames
-
-
-@cache
-def _clip(path: Path) -> Motion:
-    return drop_tpose_frames(read_bvh(path))[0]
 
 
 def test_diagonal_path_is_the_identity() -> None:
@@ -110,14 +103,14 @@ def test_bad_paths_are_rejected() -> None:
 
 
 def test_sample_motion_at_integer_frames_is_the_clip(cmu16_dir: Path) -> None:
-    m = _clip(cmu16_dir / "16_15.bvh")
+    m = load_clip(cmu16_dir / "16_15.bvh")
     same = sample_motion(m, np.arange(m.num_frames, dtype=np.float64))
     np.testing.assert_allclose(same.rotations, m.rotations, atol=1e-6)  # float32 slerp at t=0
     np.testing.assert_allclose(same.root_positions, m.root_positions, atol=1e-6)
 
 
 def test_aligning_a_clip_to_itself_is_the_identity(cmu_dir: Path, cmu16_dir: Path) -> None:
-    for m in (_clip(cmu_dir / "walk" / "07_01.bvh"), _clip(cmu16_dir / "16_15.bvh")):
+    for m in (load_clip(cmu_dir / "walk" / "07_01.bvh"), load_clip(cmu16_dir / "16_15.bvh")):
         f = pose_features(m)
         for method in ("exact", "multiscale"):
             al = align_to_reference(f, f, num_frames=100, method=method)
@@ -129,7 +122,7 @@ def test_aligning_a_clip_to_itself_is_the_identity(cmu_dir: Path, cmu16_dir: Pat
 def test_a_known_time_stretch_is_recovered(cmu_dir: Path, cmu16_dir: Path, stretch: float) -> None:
     """The reference is a walk replayed through a known monotone map ``g``; aligning the walk to
     it must give back ``A = g``."""
-    for m in (_clip(cmu_dir / "walk" / "07_01.bvh"), _clip(cmu16_dir / "16_15.bvh")):
+    for m in (load_clip(cmu_dir / "walk" / "07_01.bvh"), load_clip(cmu16_dir / "16_15.bvh")):
         big = m.fps > 60
         n = int(stretch * m.num_frames)
         s = np.linspace(0.0, 1.0, n)

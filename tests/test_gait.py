@@ -3,18 +3,16 @@
 from __future__ import annotations
 
 import csv
-from functools import cache
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import load_clip
 
 from jcrowd.errors import MotionError
-from jcrowd.io import read_bvh
 from jcrowd.motion import (
     Motion,
     Skeleton,
-    drop_tpose_frames,
     mirror,
     normalize_root,
     quat_mul,
@@ -32,11 +30,6 @@ from jcrowd.motion.gait import (
 )
 
 
-@cache
-def _clip(path: Path) -> Motion:
-    return drop_tpose_frames(read_bvh(path))[0]
-
-
 def _walks(cmu_dir: Path, cmu16_dir: Path) -> list[Path]:
     return sorted((cmu_dir / "walk").glob("*.bvh")) + sorted(cmu16_dir.glob("*.bvh"))
 
@@ -45,7 +38,7 @@ def test_every_walk_has_sane_cycles(cmu_dir: Path, cmu16_dir: Path) -> None:
     walks = _walks(cmu_dir, cmu16_dir)
     assert len(walks) == 26 + 22
     for path in walks:
-        cycles = gait_cycles(_clip(path), foot="both")
+        cycles = gait_cycles(load_clip(path), foot="both")
         assert len(cycles) >= 1, path.name
         for c in cycles:
             # Human walking cycles (two steps) last ~0.8–1.6 s; 0.7–1.8 s is the band.
@@ -57,11 +50,11 @@ def test_every_walk_has_sane_cycles(cmu_dir: Path, cmu16_dir: Path) -> None:
 
 
 def test_07_01_reports_two_cycles(cmu_dir: Path) -> None:
-    cycles = gait_cycles(_clip(cmu_dir / "walk" / "07_01.bvh"), foot="both")
+    cycles = gait_cycles(load_clip(cmu_dir / "walk" / "07_01.bvh"), foot="both")
     assert len(cycles) >= 2
     assert all(0.8 <= c.dz <= 2.0 for c in cycles)
     # Left-started cycles alone: the clip holds one full left-to-left cycle.
-    assert [c.foot for c in gait_cycles(_clip(cmu_dir / "walk" / "07_01.bvh"))] == ["left"]
+    assert [c.foot for c in gait_cycles(load_clip(cmu_dir / "walk" / "07_01.bvh"))] == ["left"]
 
 
 def test_cmu16_turns_are_seen_with_their_sign(cmu16_dir: Path) -> None:
@@ -70,7 +63,7 @@ def test_cmu16_turns_are_seen_with_their_sign(cmu16_dir: Path) -> None:
     turns = [r for r in rows if "90-degree" in r["cmu_description"]]
     assert len(turns) >= 4
     for row in turns:
-        cycles = gait_cycles(_clip(cmu16_dir / row["file"]), foot="both")
+        cycles = gait_cycles(load_clip(cmu16_dir / row["file"]), foot="both")
         biggest = max(cycles, key=lambda c: abs(c.dyaw))
         assert abs(np.degrees(biggest.dyaw)) > 60, row["file"]
         left = "left" in row["cmu_description"]
@@ -79,7 +72,7 @@ def test_cmu16_turns_are_seen_with_their_sign(cmu16_dir: Path) -> None:
 
 
 def test_mirror_flips_turn_and_side(cmu16_dir: Path) -> None:
-    clip = normalize_root(_clip(cmu16_dir / "16_15.bvh"))  # a straight walk
+    clip = normalize_root(load_clip(cmu16_dir / "16_15.bvh"))  # a straight walk
     orig = gait_cycles(clip, foot="both")
     mirr = gait_cycles(mirror(clip), foot="both")
     assert len(orig) == len(mirr)
@@ -108,7 +101,7 @@ def _moved(motion: Motion, yaw: float, shift: np.ndarray) -> Motion:
 
 
 def test_cycles_do_not_depend_on_the_world_frame(cmu_dir: Path) -> None:
-    clip = _clip(cmu_dir / "walk" / "07_03.bvh")
+    clip = load_clip(cmu_dir / "walk" / "07_03.bvh")
     base = gait_cycles(clip, foot="both")
     moved = gait_cycles(_moved(clip, 2.1, np.array([5.0, 0.0, -3.0])), foot="both")
     assert [(c.start, c.end, c.foot) for c in base] == [(c.start, c.end, c.foot) for c in moved]
@@ -118,7 +111,7 @@ def test_cycles_do_not_depend_on_the_world_frame(cmu_dir: Path) -> None:
 
 
 def test_cycles_survive_resampling(cmu_dir: Path) -> None:
-    clip = _clip(cmu_dir / "walk" / "07_06.bvh")
+    clip = load_clip(cmu_dir / "walk" / "07_06.bvh")
     base = gait_cycles(clip)
     half = gait_cycles(resample(clip, 60.0))
     assert len(half) == len(base)
@@ -130,11 +123,11 @@ def test_cycles_survive_resampling(cmu_dir: Path) -> None:
 
 
 def test_feet_are_found_on_both_skeletons(cmu_dir: Path, cmu16_dir: Path) -> None:
-    cmu = _clip(cmu_dir / "walk" / "07_01.bvh").skeleton
+    cmu = load_clip(cmu_dir / "walk" / "07_01.bvh").skeleton
     f = find_feet(cmu)
     names = [cmu.names[i] for i in (f.left_ankle, f.left_toe, f.right_ankle, f.right_toe)]
     assert names == ["LeftFoot", "LeftToeBase", "RightFoot", "RightToeBase"]
-    c16 = _clip(cmu16_dir / "16_15.bvh").skeleton
+    c16 = load_clip(cmu16_dir / "16_15.bvh").skeleton
     f = find_feet(c16)
     names = [c16.names[i] for i in (f.left_ankle, f.left_toe, f.right_ankle, f.right_toe)]
     assert names == ["lfoot", "ltoes", "rfoot", "rtoes"]
@@ -192,7 +185,7 @@ def test_hysteresis_does_not_flicker_at_a_threshold() -> None:
 
 
 def test_contacts_need_three_frames(cmu_dir: Path) -> None:
-    clip = _clip(cmu_dir / "walk" / "07_01.bvh")
+    clip = load_clip(cmu_dir / "walk" / "07_01.bvh")
     short = Motion(clip.skeleton, clip.rotations[:2], clip.root_positions[:2], clip.fps)
     with pytest.raises(MotionError, match="at least 3 frames"):
         foot_contacts(short)

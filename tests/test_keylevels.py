@@ -7,7 +7,7 @@ import itertools
 
 import numpy as np
 import pytest
-from test_tensor import smooth_tensor
+from helpers import smooth_tensor
 
 from jcrowd.errors import TensorError
 from jcrowd.tensor import (

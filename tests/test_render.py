@@ -10,7 +10,6 @@ import gc
 import math
 import os
 import warnings
-from collections.abc import Iterator
 from pathlib import Path
 
 import imageio.v2 as iio2
@@ -32,7 +31,6 @@ from jcrowd.render import (
     VideoWriter,
     View,
     frame_points,
-    make_context,
     palette_colors,
     project,
     projection_matrix,
@@ -44,20 +42,6 @@ from jcrowd.render.meshes import OBSTACLE_COLOR, capsule_mesh, prism_mesh
 PARENTS = walker_skeleton().parents
 W, H = 160, 120
 VIEW = View(eye=(0.0, 1.6, 5.0), target=(0.0, 0.9, 0.0), fov_deg=60.0)
-
-
-@pytest.fixture(scope="module")
-def ctx() -> Iterator[moderngl.Context]:
-    context = make_context()
-    yield context
-    context.release()
-
-
-@pytest.fixture(autouse=True)
-def _no_gl_error(request: pytest.FixtureRequest) -> Iterator[None]:
-    yield
-    if "ctx" in request.fixturenames:
-        assert request.getfixturevalue("ctx").error == "GL_NO_ERROR"
 
 
 def _level(poses: list[np.ndarray], capacity: int, color: int = 0) -> LevelInstances:

@@ -3,16 +3,13 @@ clothes, and errors. The golden image is ``bodies`` in ``test_render_golden.py``
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
-import moderngl
 import numpy as np
 import pytest
 from test_render_golden import body_level, place, walk_points
 
 from jcrowd.errors import RenderError
 from jcrowd.motion import character_height, walker_skeleton
-from jcrowd.render import CrowdRenderer, LevelInstances, View, make_context, project
+from jcrowd.render import CrowdRenderer, LevelInstances, View, project
 from jcrowd.render.bodies import MESH_PIXELS, body_colors, pick_meshes, tint_palette
 from jcrowd.render.camera import projection_matrix, view_matrix
 
@@ -24,22 +21,8 @@ VIEW = View(eye=(0.0, 1.6, 5.0), target=(0.0, 0.9, 0.0), fov_deg=60.0)
 
 
 @pytest.fixture(scope="module")
-def ctx() -> Iterator[moderngl.Context]:
-    context = make_context()
-    yield context
-    context.release()
-
-
-@pytest.fixture(scope="module")
 def level():  # type: ignore[no-untyped-def]
     return body_level()
-
-
-@pytest.fixture(autouse=True)
-def _no_gl_error(request: pytest.FixtureRequest) -> Iterator[None]:
-    yield
-    if "ctx" in request.fixturenames:
-        assert request.getfixturevalue("ctx").error == "GL_NO_ERROR"
 
 
 def _instances(agents: list[np.ndarray], capacity: int, fill: float = 0.0) -> LevelInstances:

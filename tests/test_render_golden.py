@@ -15,7 +15,7 @@ a few levels; interior shading differs by at most a rounding step. 1 % of a 160Ã
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,7 +42,6 @@ from jcrowd.render import (
     CrowdRenderer,
     LevelInstances,
     View,
-    make_context,
     write_png,
 )
 
@@ -217,19 +216,6 @@ def render_scene(ctx: moderngl.Context, scene: Scene) -> np.ndarray:
         sky=scene.sky,
     ) as r:
         return r.render(scene.view, scene.instances)
-
-
-@pytest.fixture(scope="module")
-def ctx() -> Iterator[moderngl.Context]:
-    context = make_context()
-    yield context
-    context.release()
-
-
-@pytest.fixture(autouse=True)
-def _no_gl_error(ctx: moderngl.Context) -> Iterator[None]:
-    yield
-    assert ctx.error == "GL_NO_ERROR"
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))

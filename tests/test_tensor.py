@@ -11,6 +11,7 @@ import itertools
 import numpy as np
 import pytest
 import tensorly as tl
+from helpers import smooth_tensor
 from tensorly.decomposition import tucker as tl_tucker
 
 from jcrowd.errors import JcrowdError, TensorError
@@ -33,18 +34,6 @@ from jcrowd.tensor import (
 
 EXACT = 1e-10
 """Relative tolerance for identities that only see rounding (products of a few hundred terms)."""
-
-
-def _orthogonal(rng: np.random.Generator, n: int) -> np.ndarray:
-    return np.linalg.qr(rng.standard_normal((n, n)))[0]
-
-
-def smooth_tensor(shape: tuple[int, ...], seed: int, decay: float = 0.12) -> np.ndarray:
-    """A tensor with a smooth, decaying multilinear spectrum (like a motion tensor)."""
-    rng = np.random.default_rng(seed)
-    grids = np.meshgrid(*(np.arange(i) for i in shape), indexing="ij")
-    core = rng.standard_normal(shape) * np.exp(-decay * sum(grids))
-    return multi_mode_product(core, [_orthogonal(rng, i) for i in shape])
 
 
 def low_rank_plus_noise(shape, ranks, noise, seed):
