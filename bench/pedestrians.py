@@ -42,7 +42,12 @@ Sections (``--sections``, default all):
   avoidance model: safety, and each agent's arrival time ÷ its free-walking time.
 
 ``--model`` (``anticipation`` or ``collision-free-speed``, default ``collision-free-speed``):
-jcrowd's model in the bottleneck, entrance and fd sections. The speed section always compares
+jcrowd's model in the bottleneck, entrance and fd sections, whose agents have a body heading
+(:mod:`jcrowd.pedestrians.heading`; ``--no-heading``: without). The entrance section also
+reports the queue's motion in front of the gap (``entrance_queue``, ``bench/follow.py``'s
+``queue_motion``, beside the same measure of the measured run), ``standing_facing_deg`` (p90
+of a standing body's heading against its desired direction) and ``heading_turn_rate_deg_s``
+(p99). The speed section always compares
 the collision-free speed model with JuPedSim's (the same model on both sides).
 
 Safety over every jcrowd scene: ``min_gap_ratio`` (smallest centre distance ÷ (r_i + r_j)),
@@ -72,12 +77,14 @@ import pandas as pd
 import pedpy
 import shapely
 from common import ROOT, machine, report
+from follow import measured_entrance, queue_motion, simulated_paths
 
 from jcrowd.cli.run import use_cpu_devices
 from jcrowd.pedestrians import (
     AvoidanceParams,
     Pedestrians,
     build_world,
+    desired_directions,
     pedestrian_step,
     split_pedestrian_step,
 )
@@ -88,6 +95,7 @@ DT = 1.0 / 30.0
 RADIUS = 0.2  # JuPedSim's default radius, used on both sides
 SPEED = 1.34  # free walking speed (Weidmann 1993)
 ENTRANCE_RADIUS = 0.13
+ENTRANCE_FPS = 25.0  # the Wuppertal entrance run's frame rate
 SPAWN_GAP = 2.05  # an entering agent waits until nobody is within 2.05 radii of its spot
 
 
@@ -97,12 +105,25 @@ SPAWN_GAP = 2.05  # an entering agent waits until nobody is within 2.05 radii of
 MODEL = "collision-free-speed"
 """jcrowd's avoidance model in the bottleneck, entrance and fd sections (``--model``)."""
 
+HEADING = True
+"""Whether jcrowd's agents have a body heading in those sections (``--no-heading``: not)."""
+
 
 def run_jcrowd(
-    area, target, spawn_xy, spawn_t, t_max, speed=SPEED, radius=RADIUS, gap=SPAWN_GAP, params=None
+    area,
+    target,
+    spawn_xy,
+    spawn_t,
+    t_max,
+    speed=SPEED,
+    radius=RADIUS,
+    gap=SPAWN_GAP,
+    params=None,
+    headings=None,
 ):
     """jcrowd's dynamics; agents appear at ``spawn_t`` once their spot is free. ``params``:
-    the avoidance model's (default: its defaults).
+    the avoidance model's (default: its defaults). ``headings``: a list that receives the
+    bodies' headings ``(F, N)`` and desired directions ``(F, N, 2)`` (with ``HEADING``).
 
     Returns ``(positions (F, N, 2), alive (F, N))`` at every step and the seconds per step.
     """
@@ -111,14 +132,19 @@ def run_jcrowd(
     xy = jnp.asarray(spawn_xy, jnp.float32)
     start = jnp.asarray(spawn_t, jnp.float32)
     params = AvoidanceParams() if params is None else params
+    target_ids = jnp.zeros(n, jnp.int32)
+    # Bodies face down their field where they appear (HEADING; None: the model without a body).
+    face = desired_directions(world.nav, target_ids, xy) if HEADING else None
+    heading0 = None if face is None else jnp.arctan2(face[:, 0], face[:, 1])
     peds = Pedestrians(
         xy,
-        jnp.zeros(n, jnp.int32),
+        target_ids,
         jnp.full(n, speed, jnp.float32),
         jnp.full(n, radius, jnp.float32),
         jnp.zeros(n, bool),
         jnp.zeros((n, 2), jnp.float32),
         MODEL == "anticipation",
+        heading=heading0,
     )
 
     def one(carry, t):
@@ -133,6 +159,9 @@ def run_jcrowd(
         )
         appear = appear & ~jnp.any(close & appear[None], axis=1)
         velocity = None if peds.velocity is None else jnp.where(appear[:, None], 0.0, peds.velocity)
+        heading = None
+        if heading0 is not None and peds.heading is not None:
+            heading = jnp.where(appear, heading0, peds.heading)
         peds = Pedestrians(
             jnp.where(appear[:, None], xy, p),
             peds.target,
@@ -141,9 +170,12 @@ def run_jcrowd(
             peds.alive | appear,
             velocity,
             peds.anticipate,
+            heading=heading,
         )
         peds, _ = pedestrian_step(params, world, peds, DT)
-        return (peds, pending & ~appear), (peds.position, peds.alive)
+        face = jnp.zeros(n) if peds.heading is None else peds.heading
+        desired = desired_directions(world.nav, peds.target, peds.position)
+        return (peds, pending & ~appear), (peds.position, peds.alive, face, desired)
 
     @jax.jit
     def chunk(carry, ts):
@@ -151,17 +183,22 @@ def run_jcrowd(
 
     carry = (peds, jnp.ones(n, bool))
     steps = math.ceil(t_max / DT)
-    out_p, out_a = [], []
+    out_p, out_a, out_h, out_d = [], [], [], []
     t0 = time.perf_counter()
     for k0 in range(0, steps, 300):
         ts = jnp.arange(k0, min(k0 + 300, steps), dtype=jnp.float32) * DT
-        carry, (pos, alive) = chunk(carry, ts)
+        carry, (pos, alive, face, desired) = chunk(carry, ts)
         out_p.append(np.asarray(pos))
         out_a.append(np.asarray(alive))
+        if headings is not None:
+            out_h.append(np.asarray(face))
+            out_d.append(np.asarray(desired))
         if not bool(carry[0].alive.any()) and not bool(carry[1].any()):
             break
     seconds = time.perf_counter() - t0
     pos, alive = np.concatenate(out_p), np.concatenate(out_a)
+    if headings is not None:
+        headings.extend([np.concatenate(out_h), np.concatenate(out_d)])
     return pos, alive, seconds / len(pos)
 
 
@@ -352,7 +389,10 @@ def entrance(out):
     # 0.2 m disc cannot hold it, so both simulators get 0.13 m discs here.
     r = ENTRANCE_RADIUS
     run = {"radius": r, "gap": 2.0}  # everyone stands where measured at t = 0
-    p, a, _ = run_jcrowd(area, exit_, starts, np.zeros(n), 3 * measured_total, **run)
+    faces: list[np.ndarray] = []
+    p, a, _ = run_jcrowd(
+        area, exit_, starts, np.zeros(n), 3 * measured_total, **run, headings=faces
+    )
     jp, ja, _ = run_jupedsim(area, exit_, starts, np.zeros(n), 3 * measured_total, **run)
     res = {}
     for name, (pp, aa) in (("jcrowd", (p, a)), ("jupedsim", (jp, ja))):
@@ -370,7 +410,30 @@ def entrance(out):
     out["jupedsim_entrance"] = {k: round(v, 3) for k, v in res["jupedsim"].items()}
     out["entrance_measured"] = {"flow": 1.16, "total": 64.5, "density": 5.9}
     out["safety"]["entrance"] = safety(p, a, area, r)
+    fps = 1.0 / DT
+    out["entrance_queue"] = queue_motion(simulated_paths(p, a), fps)
+    out["entrance_queue_measured"] = queue_motion(measured_entrance(), ENTRANCE_FPS)
+    if HEADING:
+        out.update(heading_measures(p, a, *faces))
     print(f"entrance: {res}", file=sys.stderr, flush=True)
+
+
+def heading_measures(pos, alive, heading, desired, stand=0.1):
+    """``standing_facing_deg``: the p90 angle between a standing body's heading and its
+    desired direction (agent-frames slower than ``stand`` m/s, alive on both sides of the
+    step); ``heading_turn_rate_deg_s``: the p99 of how fast headings turn (°/s)."""
+    both = alive[1:] & alive[:-1]
+    speed = np.linalg.norm(pos[1:] - pos[:-1], axis=-1) / DT
+    want = np.arctan2(desired[1:, ..., 0], desired[1:, ..., 1])
+    off = np.abs(np.remainder(heading[1:] - want + np.pi, 2 * np.pi) - np.pi)
+    standing = both & (speed < stand)
+    turn = np.abs(np.remainder(heading[1:] - heading[:-1] + np.pi, 2 * np.pi) - np.pi) / DT
+    return {
+        "standing_facing_deg": round(float(np.degrees(np.percentile(off[standing], 90))), 1)
+        if standing.any()
+        else float("nan"),
+        "heading_turn_rate_deg_s": round(float(np.degrees(np.percentile(turn[both], 99))), 1),
+    }
 
 
 def _entrance_density(pos, alive, area, times):
@@ -858,7 +921,23 @@ def _text(out):
             f"jcrowd {out['entrance_flow_per_s']} /s, {out['entrance_total_s']} s, "
             f"{out['entrance_density_per_m2']} /m²; JuPedSim "
             f"{j['flow']} /s, {j['total']} s, {j['density']} /m²",
+            "",
+            "| entrance queue | moving share | away > 60° | away > 90° | velocity vs smooth "
+            "heading p99 ° |",
+            "|---|---|---|---|---|",
         ]
+        for name, key in (("jcrowd", "entrance_queue"), ("measured", "entrance_queue_measured")):
+            q = out[key]
+            lines.append(
+                f"| {name} | {q['moving_share']} | {q['away_over_60_share']} | "
+                f"{q['away_over_90_share']} | {q['smooth_heading_p99_deg']} |"
+            )
+        if "standing_facing_deg" in out:
+            lines += [
+                "",
+                f"bodies: standing facing p90 {out['standing_facing_deg']}°, "
+                f"turn rate p99 {out['heading_turn_rate_deg_s']}°/s",
+            ]
     if "fd" in out:
         lines += [
             "",
@@ -928,14 +1007,16 @@ def main() -> None:
         "--model", default="collision-free-speed", choices=("collision-free-speed", "anticipation")
     )
     ap.add_argument("--no-record", action="store_true")
+    ap.add_argument("--no-heading", action="store_true", help="jcrowd's agents without a body")
     ap.add_argument("--cpu-devices", type=int, default=1, help="split jcrowd's speed runs")
     args = ap.parse_args()
     use_cpu_devices(args.cpu_devices)  # before JAX starts its backend
     sections = set(args.sections.split(","))
-    global MODEL
-    MODEL = args.model
+    global MODEL, HEADING
+    MODEL, HEADING = args.model, not args.no_heading
     out: dict = {
         "model": MODEL,
+        "heading": HEADING,
         "safety": {},
         "machine": machine(),
         "jax": jax.__version__,
@@ -959,6 +1040,7 @@ def main() -> None:
     details = (
         f"{out['machine']}, jax {out['jax']}, JuPedSim {out['jupedsim']}, dt 1/30 s, "
         f"sections {args.sections}, model {MODEL}, cpu × {jax.device_count()}"
+        + ("" if HEADING else ", no heading")
     )
     if MODEL == "collision-free-speed":  # the plots show the model JuPedSim runs too
         plot(out)

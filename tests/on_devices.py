@@ -198,8 +198,9 @@ def crowd_task(steps: str) -> dict[str, Any]:
 def pedestrians_task(model: str) -> dict[str, Any]:
     """``split_pedestrian_step`` over every device and over the first alone, 200 steps of 40
     agents leaving a 6 m room through a 1 m corridor (``model``: ``plain``, the collision-free
-    speed model; ``anticipating``, with velocities). Per side (``split``, ``one``): final
-    positions and alive flags, the agents out at each step (``left``) and ``shards``."""
+    speed model; ``anticipating``, with velocities and body headings). Per side (``split``,
+    ``one``): final positions, alive flags (and headings), the agents out at each step
+    (``left``) and ``shards``."""
     import jax
     import jax.numpy as jnp
     import numpy as np
@@ -218,7 +219,8 @@ def pedestrians_task(model: str) -> dict[str, Any]:
     xs = np.arange(0.5, 5.5, 0.6)
     pts = np.stack(np.meshgrid(xs, np.arange(0.5, 5.0, 0.6)), -1).reshape(-1, 2)[:40]
     n = len(pts)
-    velocity = {"plain": None, "anticipating": jnp.zeros((n, 2), jnp.float32)}[model]
+    anticipating = model == "anticipating"
+    velocity = jnp.zeros((n, 2), jnp.float32) if anticipating else None
     start = Pedestrians(
         jnp.asarray(pts, jnp.float32),
         jnp.zeros(n, jnp.int32),
@@ -226,12 +228,15 @@ def pedestrians_task(model: str) -> dict[str, Any]:
         jnp.full(n, 0.2, jnp.float32),
         jnp.ones(n, bool),
         velocity,
+        # The anticipating bodies have a heading that binds their speed (back_share < 1).
+        heading=jnp.linspace(-3.0, 3.0, n, dtype=jnp.float32) if anticipating else None,
     )
+    params = AvoidanceParams(back_share=0.5) if anticipating else AvoidanceParams()
     out: dict[str, Any] = {"devices": len(jax.devices()), "refused": None}
     for side, devices in (("split", jax.devices()), ("one", jax.devices()[:1])):
         step, peds, left = split_pedestrian_step(devices), start, []
         for _ in range(200):
-            peds, info = step(AvoidanceParams(), world, peds, jnp.float32(1 / 30))
+            peds, info = step(params, world, peds, jnp.float32(1 / 30))
             left.append(int(np.sum(np.asarray(info.arrived))))
         out[side] = {
             "pos": np.asarray(peds.position).tolist(),
@@ -239,6 +244,8 @@ def pedestrians_task(model: str) -> dict[str, Any]:
             "left": left,
             "shards": len(peds.position.sharding.device_set),
         }
+        if peds.heading is not None:
+            out[side]["heading"] = np.asarray(peds.heading).tolist()
     return out
 
 

@@ -3,11 +3,11 @@
 With :attr:`~jcrowd.crowd.state.StepConfig.avoid` on, the simulation is the authority on
 where people are: :func:`walk` calls the pedestrian step (:mod:`jcrowd.pedestrians`) for each
 alive agent — towards its current waypoint, down the waypoint's navigation field in a layout,
-among its neighbours — and the root moves by ``v·dt``. The body turns towards the velocity at
-most :data:`TURN_RATE` rad/s (:func:`turn_towards`: a walker turns its whole body over about a
-step, not in one frame; a slow one turns slower, as people shuffling in a queue sidestep
-rather than turn), and the next gait cycle is chosen from the velocity (:func:`aim_point`), so
-the clips follow the simulated path.
+among its neighbours — and the root moves by ``v·dt``. The body faces the step's heading
+(:mod:`jcrowd.pedestrians.heading`: towards the walking direction, the waypoint's when standing
+or shuffling, at a bounded turn rate), and the next gait cycle is chosen from the velocity
+(:func:`aim_point`), so the clips follow the simulated path. :func:`turn_towards` is the
+velocity-only rule, for callers without the dynamics' heading.
 """
 
 from __future__ import annotations
@@ -74,9 +74,11 @@ def walk(
     dt: Array,
     gather: Callable[[Array], Array] | None = None,
     ids: Array | None = None,
-) -> tuple[Array, Array, Array]:
-    """The crowd step's dynamics stage: each agent's velocity ``(vx, vz)`` this step and the
-    neighbour grid's overflow, from :func:`~jcrowd.pedestrians.step.pedestrian_step`.
+) -> tuple[Array, Array, Array, Array]:
+    """The crowd step's dynamics stage: each agent's velocity ``(vx, vz)`` this step, its body
+    heading after the step and the neighbour grid's overflow, from
+    :func:`~jcrowd.pedestrians.step.pedestrian_step` (the heading turns towards the walking
+    direction, or the waypoint's when slow: :mod:`jcrowd.pedestrians.heading`).
 
     The agents walk towards their current waypoint (down its field in a ``world`` with a
     layout, straight at it without one: :func:`~jcrowd.pedestrians.world.open_world`) with
@@ -105,10 +107,12 @@ def walk(
         velocity=jnp.stack([state.vx, state.vz], axis=1),
         goal=jnp.stack([tx, tz], axis=1),
         anticipate=config.anticipate,
+        heading=state.heading,
     )
     params = config.avoidance_params()
-    _, info = pedestrian_step(params, place, peds, dt, gather, ids, due, elapsed)
-    return info.velocity[:, 0], info.velocity[:, 1], info.overflow
+    moved, info = pedestrian_step(params, place, peds, dt, gather, ids, due, elapsed)
+    heading = cast(Array, moved.heading)
+    return info.velocity[:, 0], info.velocity[:, 1], heading, info.overflow
 
 
 def due_rows(

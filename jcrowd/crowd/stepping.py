@@ -17,8 +17,8 @@
    skeleton, τ advancing by ``dt · fps / ΔA(τ)`` (the inverse time-warp, 001 §3.5) — or, with
    the dynamics, with the distance walked (:func:`~jcrowd.crowd.following.follow_phase`).
    Culled agents advance their root only, by dead reckoning along their clip's arc (000 §4.3).
-5. **Root motion**: by ``v·dt`` with the dynamics (the heading turning towards the velocity;
-   below 0.1 m/s the agent stands at a double-support phase and keeps its heading), else by
+5. **Root motion**: by ``v·dt`` with the dynamics (the body facing the dynamics' heading;
+   below 0.1 m/s the agent stands at a double-support phase), else by
    the decoded motion, with the stance foot locked near the camera.
 6. **Clips** (:mod:`jcrowd.crowd.schedule`): waypoints, the next cycle chosen at mid-cycle
    (bounded per step, kriged for synthesized agents), the hand-over at the cycle's end.
@@ -56,7 +56,7 @@ from jcrowd.crowd.lod import (
 from jcrowd.crowd.pool import Pool, spawn_due
 from jcrowd.crowd.schedule import schedule
 from jcrowd.crowd.state import CrowdState, Frame, StepConfig, refresh_far_cores
-from jcrowd.crowd.steering import turn_towards, walk
+from jcrowd.crowd.steering import walk
 from jcrowd.crowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
 from jcrowd.motion.fastmath import sincos
 from jcrowd.pedestrians.world import World
@@ -339,15 +339,16 @@ def _move_roots(
     alive: Array,
     motion: tuple[Array, Array, Array, Array],
     dt: Array,
+    facing: Array | None,
 ) -> CrowdState:
     """Stage 5: the roots of the agents alive at the step's start move — by ``v·dt`` with the
-    dynamics (the heading turning towards the velocity; a standing agent keeps it), else by
-    the decoded or dead-reckoned motion — and the phase advances."""
+    dynamics, the body taking their heading (``facing``), else by the decoded or dead-reckoned
+    motion — and the phase advances."""
     dtau, dyaw, dx, dz = motion
     vx, vz = state.vx, state.vz  # the dynamics' output; without them it stays as it was
-    if config.avoid:
+    if config.avoid and facing is not None:
         dx, dz = vx * dt, vz * dt
-        heading = turn_towards(state.heading, vx, vz, dt, min_speed=STAND_BELOW)
+        heading = facing
     else:
         heading = state.heading + dyaw
     moved = (
@@ -393,14 +394,14 @@ def step(
     lod = _level_of_detail(cm, config, state, view)
     buckets = lod.buckets
     alive = state.alive
-    crowding = jnp.zeros((), jnp.int32)
+    crowding, facing = jnp.zeros((), jnp.int32), None
     if config.avoid:  # first: the phase follows this step's walk (the root moves by v·dt)
         near = buckets.level <= config.blend_max_level
-        vx, vz, crowding = walk(config, world, state, near, dt, gather, ids)
+        vx, vz, facing, crowding = walk(config, world, state, near, dt, gather, ids)
         state = eqx.tree_at(lambda s: (s.vx, s.vz), state, (vx, vz))
     blending = _blending(cm, config, state, buckets, dt)
     state, points, motion = _synthesis(cm, config, state, buckets, blending.rows, dt)
-    state = _move_roots(cm, config, state, alive, motion, dt)
+    state = _move_roots(cm, config, state, alive, motion, dt, facing)
     state, deferred = schedule(cm, config, state, buckets.level < nlev, world)
     shown = jnp.where(alive, buckets.level, nlev)
     left = jnp.maximum(blending.left - dt, 0.0)

@@ -30,13 +30,12 @@ the measurements behind each):
   pressed into most, ``w = clip((r_i + m − d)/m, 0, 1)``, ``m`` = 0.1 m: a navigation path is a
   point's, and beside a corner it points into the wall for a body of radius ``r``.
 
-The reaction time and anticipation, given the last velocities, are :mod:`~jcrowd.pedestrians.
-reaction`. Smoothness: Eq. (4) and ``V`` are smooth; the spacing is a minimum over a set the
-direction decides and the slide picks one wall, so the gradient jumps where those change.
+With the last velocities: :mod:`~jcrowd.pedestrians.reaction`, :mod:`~jcrowd.pedestrians.
+heading`. Eq. (4) and ``V`` are smooth; the spacing is a minimum over a set the direction
+decides and the slide picks one wall: the gradient jumps where those change.
 
-Conventions: positions ``[x, z]`` in metres, velocities m/s. Neighbours come as candidate ids
-(``N`` for none), walls as segments ``(S, 2, 2)`` with per-agent candidate ids (``S`` for
-none); the step evaluates the model through the grid with
+Positions ``[x, z]`` in metres, velocities m/s; neighbours as candidate ids (``N``: none),
+walls as segments ``(S, 2, 2)`` with candidate ids (``S``: none), through the grid in
 :func:`~jcrowd.pedestrians.grid_avoidance.avoid_in_grid`.
 """
 
@@ -45,6 +44,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
+from jcrowd.pedestrians.heading import body_speed
 from jcrowd.pedestrians.params import AvoidanceParams
 from jcrowd.pedestrians.reaction import TINY as _TINY
 from jcrowd.pedestrians.reaction import Motion, react, relax_velocity, sideways
@@ -252,6 +252,8 @@ def avoid_rows(
 
     gap = spacing(ex, ez)
     v = optimal_velocity(params, speed, gap)
+    if motion is not None and motion.facing is not None:  # a body walks along its heading
+        v = body_speed(params, ex, ez, v, motion.facing)
     if motion is not None and motion.crowd is None:  # the plain model with its reaction time
         ex, ez, v = relax_velocity(params.plain_reaction_time, motion, ex, ez, v)
         gap = spacing(ex, ez)

@@ -77,10 +77,7 @@ def avoid_in_grid(
     own = cells.place[rows]
 
     def velocities(sel: Array, near: Array) -> Array:
-        moving = None
-        if motion is not None:
-            dt = motion.dt[sel] if motion.dt.ndim else motion.dt
-            moving = Motion(motion.own[sel], motion.crowd, dt)
+        moving = None if motion is None else motion.rows(sel)
         h = None if horizon is None else (horizon[sel] if jnp.ndim(horizon) else horizon)
         v, _ = avoid_rows(
             params,

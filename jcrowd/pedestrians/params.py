@@ -4,8 +4,9 @@ The collision-free speed model's (:mod:`jcrowd.pedestrians.avoidance`, Tordeux, 
 Seyfried 2016, Eqs. 2 and 4, with our smooth ``V``, anisotropy and wall slide) and the reaction
 time and anticipation model's (:mod:`jcrowd.pedestrians.reaction`). The defaults of ``a``,
 ``D``, ``a_w``, ``D_w``, ``t_a``, ``a_a``, ``D_a`` and ``τ`` are JuPedSim 1.4's; ``T``, ``n``,
-``λ``, ``m`` and ``τ_p`` are ours, validated in ``bench/pedestrians.py`` (docs/validation.md).
-Every field is an array, so a changed value (a calibration, a gradient step) never recompiles.
+``λ``, ``m``, ``τ_p`` and the heading's (:mod:`jcrowd.pedestrians.heading`) are ours, validated
+in ``bench/pedestrians.py`` (docs/validation.md). Every field is an array, so a changed value
+(a calibration, a gradient step) never recompiles.
 """
 
 from __future__ import annotations
@@ -34,8 +35,13 @@ class AvoidanceParams(eqx.Module):
         reaction_time: ``τ`` (s) over which the anticipating direction follows.
         plain_reaction_time: the same for the plain model, given the last velocities (the
             fifth change, :mod:`jcrowd.pedestrians.reaction`).
-        keep_right: ``b`` (m), the tie-break of an exact head-on meeting.
+        keep_right: ``b`` (m), the bias to step right of someone met head-on.
         side_width: ``w`` (m).
+        back_share: the share of the speed left walking straight back from the heading (1:
+            the heading does not change the speed; :mod:`jcrowd.pedestrians.heading`).
+        walk_speed: ``v_walk`` (m/s), from which the heading follows the velocity alone.
+        heading_time: ``τ_h`` (s) over which the heading relaxes.
+        turn_rate: ``ω`` (rad/s), the fastest the heading turns.
     """
 
     strength: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.0)
@@ -48,8 +54,12 @@ class AvoidanceParams(eqx.Module):
     anticipation_strength: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.0)
     anticipation_range: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
     reaction_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.3)
-    keep_right: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.05)
+    keep_right: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.2)
     side_width: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
     wall_slide: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
     anisotropy: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.3)
     plain_reaction_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
+    back_share: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1.0)
+    walk_speed: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.5)
+    heading_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.2)
+    turn_rate: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.0)

@@ -25,15 +25,17 @@ transcription):
   ``t_a`` seconds and ``p_ij`` their separation then;
 - *strategy*: step sideways, to the side ``i`` is predicted on: ``e_i = u(e_i^{CSM} + Σ_j k_ij
   a_a exp((ℓ_ij − s^a_ij)/D_a) tanh((p_ij·r_i + b)/w) r_i)``, ``r_i`` the right of ``e_i^0``,
-  ``b`` a small keep-right bias that breaks an exact head-on tie, ``w`` the turn's width;
+  ``b`` a keep-right bias (``i`` steps right unless it is predicted more than ``b`` to the
+  left of ``j``), ``w`` the turn's width;
 - *reaction*: ``e_i ← u(e_i^{prev} + (e_i − e_i^{prev}) min(1, Δt/τ))`` from the last
   velocity's direction, ``Δt`` the time since the agent's last update, over the direction
   chosen among people (bodies' repulsion included); walls act at once, after it.
 
 Defaults ``t_a`` = 1 s, ``a_a`` = 8, ``D_a`` = 0.1 m, ``τ`` = 0.3 s (JuPedSim 1.4's), ``b`` =
-0.05 m, ``w`` = 0.1 m. Counter-flowing groups pass where the plain model jams head-on; in front
-of a narrow gap people step sideways and pass it slower than measured, so it is not the
-default (``bench/pedestrians.py --model anticipation``; docs/validation.md).
+0.2 m (a lane rule: with a few centimetres the mouths of ``examples/bidirectional.toml`` jam;
+docs/design/pedestrians.md), ``w`` = 0.1 m. Counter-flowing groups pass where the plain model
+jams head-on; in front of a narrow gap people step sideways and pass it slower than measured,
+so it is not the default (``bench/pedestrians.py --model anticipation``; docs/validation.md).
 """
 
 from __future__ import annotations
@@ -55,12 +57,20 @@ class Motion(eqx.Module):
     """What the reaction time and anticipation read (:func:`~jcrowd.pedestrians.avoidance.avoid`):
     the agents' own velocities of the last step ``(n, 2)``, the crowd's ``(P, 2)`` in the rows
     neighbour ids index (the same array when the agents are the crowd; ``None``: the plain
-    model, whose velocity only relaxes), and the time since their last update ``dt`` (s; one,
-    or one per agent)."""
+    model, whose velocity only relaxes), the time since their last update ``dt`` (s; one,
+    or one per agent) and, for agents with a heading, the unit direction each faces
+    ``(n, 2)`` (:mod:`jcrowd.pedestrians.heading`)."""
 
     own: Float[Array, "n 2"]
     crowd: Float[Array, "P 2"] | None
     dt: Float[Array, "*n"] = eqx.field(converter=jnp.asarray)
+    facing: Float[Array, "n 2"] | None = None
+
+    def rows(self, sel: Array) -> Motion:
+        """The same for the agents ``sel`` (``crowd`` is everyone's and stays whole)."""
+        dt = self.dt[sel] if self.dt.ndim else self.dt
+        face = None if self.facing is None else self.facing[sel]
+        return Motion(self.own[sel], self.crowd, dt, face)
 
 
 def sideways(

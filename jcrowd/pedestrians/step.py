@@ -15,7 +15,8 @@ This is the one implementation of the model: the animated crowd step (:mod:`jcro
 the differentiable rollouts (:mod:`jcrowd.rollouts`) and ``bench/pedestrians.py`` all call
 :func:`pedestrian_step`. Two options serve the animated crowd: ``due`` updates only some rows
 (simulation level of detail: far agents in turn, the others keep their last velocity) and
-``elapsed`` gives each agent the time since its last update. Split over devices each device
+``elapsed`` gives each agent the time since its last update. Agents with a heading turn it
+every step (:mod:`jcrowd.pedestrians.heading`). Split over devices each device
 steps its own block of agents but sees the whole crowd as neighbours (``gather``, ``ids``;
 :func:`split_pedestrian_step`).
 """
@@ -33,6 +34,7 @@ from jaxtyping import Array, Bool, Float, Int
 from jcrowd.errors import JcrowdError
 from jcrowd.pedestrians.blocking import OneStepAtATime
 from jcrowd.pedestrians.grid_avoidance import avoid_in_grid
+from jcrowd.pedestrians.heading import facing, turn_heading
 from jcrowd.pedestrians.navigation import desired_directions, field_values
 from jcrowd.pedestrians.neighbours import cell_index, cell_list
 from jcrowd.pedestrians.params import AvoidanceParams
@@ -60,6 +62,10 @@ class Pedestrians(eqx.Module):
         anticipate: with ``velocity``, the anticipation model (else the plain one).
         goal: ``(N, 2)`` a point each agent walks straight at once inside its target, and
             everywhere in a world without fields (``None``: down the fields all the way).
+        heading: ``(N,)`` the way each body faces (rad, facing ``(sin θ, cos θ)``; needs
+            ``velocity``): it turns towards the walking or, when slow, the desired direction
+            at a bounded rate, and with ``back_share`` < 1 people walk mostly along it
+            (:mod:`jcrowd.pedestrians.heading`); ``None``: no body.
     """
 
     position: Float[Array, "N 2"]
@@ -70,6 +76,7 @@ class Pedestrians(eqx.Module):
     velocity: Float[Array, "N 2"] | None = None
     anticipate: bool = eqx.field(static=True, default=True)
     goal: Float[Array, "N 2"] | None = None
+    heading: Float[Array, " N"] | None = None
 
 
 class StepInfo(eqx.Module):
@@ -110,8 +117,9 @@ def _velocity(
     ids: Array | None,
     due: Array | None,
     elapsed: Array | None,
-) -> tuple[Array, Array]:
-    """Every agent's velocity ``(N, 2)`` this step and the neighbour grid's overflow."""
+) -> tuple[Array, Array, Array | None]:
+    """Every agent's velocity ``(N, 2)`` this step, the neighbour grid's overflow and, with a
+    heading, every agent's desired direction ``(N, 2)``."""
     n = peds.position.shape[0]
     anticipating = peds.velocity is not None and peds.anticipate
     alive_f = peds.alive[:, None].astype(peds.radius.dtype)
@@ -125,12 +133,16 @@ def _velocity(
     since = jnp.asarray(dt) if elapsed is None else elapsed
     if due is not None:
         since = jnp.broadcast_to(jnp.asarray(since, peds.radius.dtype), (n,))
-    motion = None
+    motion, everyone = None, None
     if peds.velocity is not None:
-        motion = Motion(peds.velocity, every[:, 4:6] if anticipating else None, since)
+        face = None if peds.heading is None else facing(peds.heading)
+        motion = Motion(peds.velocity, every[:, 4:6] if anticipating else None, since, face)
+    if peds.heading is not None:  # the heading turns every step, towards it when slow
+        everyone = _desired(world, peds.position, peds.target, peds.goal)
     rows = jnp.arange(n, dtype=jnp.int32) if ids is None else ids
     position, target, goal = peds.position, peds.target, peds.goal
     speed, radius, moving = peds.speed, peds.radius, peds.alive
+    desired = everyone
     horizon = None
     if due is not None:  # only these rows are computed; padding (n) is nobody
         sel = jnp.where(due < n, due, 0)
@@ -139,9 +151,12 @@ def _velocity(
             a[sel] for a in (position, target, speed, radius, rows)
         )
         goal = None if goal is None else goal[sel]
+        desired = None if everyone is None else everyone[sel]
         horizon = since[sel]
         if motion is not None:
-            motion = Motion(motion.own[sel], motion.crowd, motion.dt[sel])
+            motion = motion.rows(sel)
+    if desired is None:
+        desired = _desired(world, position, target, goal)
     if world.cell_walls is None:
         wall_ids = jnp.zeros((position.shape[0], 1), jnp.int32)
     else:
@@ -151,7 +166,7 @@ def _velocity(
         world.grid,
         cells,
         position,
-        _desired(world, position, target, goal),
+        desired,
         speed,
         radius,
         moving,
@@ -165,7 +180,7 @@ def _velocity(
     if due is not None:  # the rows not due keep their last velocity
         last = jnp.zeros_like(peds.position) if peds.velocity is None else peds.velocity
         velocity = jnp.where(peds.alive[:, None], last.at[due].set(velocity, mode="drop"), 0.0)
-    return velocity, cells.overflow
+    return velocity, cells.overflow, everyone
 
 
 def pedestrian_step(
@@ -200,7 +215,12 @@ def pedestrian_step(
         The agents moved (``alive`` false for those that arrived; ``velocity`` updated when
         given) and the step's :class:`StepInfo`.
     """
-    velocity, overflow = _velocity(params, world, peds, dt, gather, ids, due, elapsed)
+    if peds.heading is not None and peds.velocity is None:
+        raise JcrowdError(
+            "pedestrian_step: expected the last velocities (Pedestrians.velocity) with a "
+            "heading, found none"
+        )
+    velocity, overflow, desired = _velocity(params, world, peds, dt, gather, ids, due, elapsed)
     position = peds.position + velocity * dt
     arrived = jnp.zeros_like(peds.alive)
     if world.nav is not None:
@@ -210,6 +230,10 @@ def pedestrian_step(
     moved = eqx.tree_at(lambda p: (p.position, p.alive), peds, (position, peds.alive & ~arrived))
     if peds.velocity is not None:
         moved = eqx.tree_at(lambda p: p.velocity, moved, velocity)
+    if peds.heading is not None and desired is not None:
+        turned = turn_heading(params, peds.heading, velocity, desired, dt)
+        heading = jnp.where(peds.alive, turned, peds.heading)
+        moved = eqx.tree_at(lambda p: p.heading, moved, heading)
     return moved, info
 
 
