@@ -330,7 +330,7 @@ def test_grid_kernel_equals_avoid_with_every_slot(clump, spread):
 
 # --------------------------------------------------------------------------- anticipation
 
-TA, AA, DA, TAU, KEEP, WIDTH, WALKING = 1.0, 8.0, 0.1, 0.3, 0.05, 0.1, 0.3
+TA, AA, DA, TAU, KEEP, WIDTH, WALKING = 1.0, 8.0, 0.1, 0.3, 0.1, 0.1, 0.3
 
 
 def _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt):

@@ -31,6 +31,7 @@ from jcrowd.pedestrians.world import open_world
 def _turn_loop(params: AvoidanceParams, heading, velocity, desired, dt):
     """The turn rule one agent at a time in plain floats."""
     walk, tau, rate = float(params.walk_speed), float(params.heading_time), float(params.turn_rate)
+    stand = float(params.stand_turn_share)
     out = []
     for h, (vx, vz), (dx, dz) in zip(heading, velocity, desired, strict=True):
         speed = math.hypot(vx, vz)
@@ -44,7 +45,8 @@ def _turn_loop(params: AvoidanceParams, heading, velocity, desired, dt):
         diff = math.atan2(tx, tz) - h
         diff = (diff + math.pi) % (2 * math.pi) - math.pi
         turn = diff * min(1.0, dt / tau)
-        out.append(h + max(-rate * dt, min(rate * dt, turn)))
+        limit = rate * (stand + (1 - stand) * w) * dt
+        out.append(h + max(-limit, min(limit, turn)))
     return np.array(out)
 
 
@@ -124,7 +126,7 @@ def test_a_standing_agent_turns_to_face_down_its_field():
     params, dt = AvoidanceParams(), 1 / 30
     step = jax.jit(pedestrian_step)
     before = np.asarray(peds.heading)
-    for _ in range(60):
+    for _ in range(200):  # a standing body turns at a quarter of 3 rad/s
         peds, info = step(params, world, peds, dt)
         after = np.asarray(peds.heading)
         turned = np.abs(np.remainder(after - before + np.pi, 2 * np.pi) - np.pi)
@@ -167,6 +169,9 @@ def test_a_walker_faces_where_it_walks_and_a_standing_one_its_goal():
     np.testing.assert_allclose(
         np.remainder(h[0], 2 * np.pi), math.atan2(v[0, 0], v[0, 1]), atol=1e-3
     )
+    for _ in range(120):  # standing, it turns at a quarter of the rate: π takes over 4 s
+        peds, info = step(AvoidanceParams(), world, peds, 1 / 30)
+    h = np.asarray(peds.heading)
     assert abs(np.remainder(h[1], 2 * np.pi) - math.pi) < 1e-3  # goal at −z: θ = π
 
 

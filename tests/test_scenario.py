@@ -38,6 +38,7 @@ EXPECTED_COUNTS = {  # what each example promises (examples/README.md)
     "city_100k": (100_000, 7),
     "entrance": (75, 1),
     "station": (0, 2),  # everyone comes from [[sources]]
+    "bidirectional": (0, 2),  # the same
 }
 
 # An arrow-shaped, non-convex polygon: a 10 × 4 shaft and a head, reflex vertices at the joins.

@@ -12,10 +12,11 @@ Seyfried 2021; Farina et al. 2017):
 1. **The heading turns** towards ``t = u(w v̂ + (1 − w) e⁰)``, ``w = S(‖v‖/v_walk)``, ``S`` the
    smoothstep: a walking person faces where they go, a standing or shuffling one their desired
    direction (goal or field) — a jostle in a queue does not turn the body. It relaxes over
-   ``τ_h`` and turns at most ``ω`` rad/s: ``θ ← θ + clip(Δ min(1, Δt/τ_h), ±ω Δt)``, ``Δ`` the
-   wrapped angle to ``t``. Willems et al. (Sci. Rep. 2020) measured the walking direction
-   following the body's with about 100 ms delay; ``τ_h`` = 0.2 s, ``ω`` = 3 rad/s,
-   ``v_walk`` = 0.5 m/s.
+   ``τ_h`` and turns at most ``ω (s + (1 − s) w)`` rad/s: ``θ ← θ + clip(Δ min(1, Δt/τ_h),
+   ±ω (s + (1 − s) w) Δt)``, ``Δ`` the wrapped angle to ``t``. Willems et al. (Sci. Rep. 2020)
+   measured the walking direction following the body's with about 100 ms delay; ``τ_h`` =
+   0.2 s, ``ω`` = 3 rad/s, ``v_walk`` = 0.5 m/s. A standing body turns at ``s`` = 0.25 of that:
+   its feet stay planted while it turns, so a faster turn slides them.
 2. **Walking mostly along the heading** (``back_share`` ``b`` < 1): the model's speed ``V``
    (Eq. 2) is scaled by ``f = b + (1 − b) ((1 + cos φ)/2)²``, ``φ`` between the chosen
    direction and the heading: 1 ahead, ``(1 + 3b)/4`` to the side, ``b`` straight back; only
@@ -74,7 +75,8 @@ def turn_heading(
     dt: Float[Array, "*N"] | float,
 ) -> Float[Array, " N"]:
     """Rule 1 (module docstring): the heading turned towards the walking direction, or the
-    desired one when slow, relaxed over ``heading_time`` and at most ``turn_rate·dt``. Kept
+    desired one when slow, relaxed over ``heading_time`` and at most ``turn_rate·dt`` (a share
+    ``stand_turn_share`` of it standing). Kept
     where neither direction is defined (a person standing with nowhere to go)."""
     vx, vz = velocity[:, 0], velocity[:, 1]
     sq = vx * vx + vz * vz
@@ -87,6 +89,7 @@ def turn_heading(
     want = jnp.arctan2(jnp.where(has, tx, 0.0), jnp.where(has, tz, 1.0))
     diff = jnp.remainder(want - heading + jnp.pi, 2.0 * jnp.pi) - jnp.pi
     dt = jnp.asarray(dt, heading.dtype)
-    limit = params.turn_rate * dt
+    share = params.stand_turn_share + (1.0 - params.stand_turn_share) * w
+    limit = params.turn_rate * share * dt
     turn = jnp.clip(diff * jnp.minimum(1.0, dt / params.heading_time), -limit, limit)
     return jnp.where(has, heading + turn, heading)

@@ -42,6 +42,7 @@ class AvoidanceParams(eqx.Module):
         walk_speed: ``v_walk`` (m/s), from which the heading follows the velocity alone.
         heading_time: ``τ_h`` (s) over which the heading relaxes.
         turn_rate: ``ω`` (rad/s), the fastest the heading turns.
+        stand_turn_share: the share of ``ω`` a standing body turns at.
     """
 
     strength: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.0)
@@ -54,12 +55,13 @@ class AvoidanceParams(eqx.Module):
     anticipation_strength: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.0)
     anticipation_range: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
     reaction_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.3)
-    keep_right: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.2)
+    keep_right: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
     side_width: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
     wall_slide: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
     anisotropy: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.3)
     plain_reaction_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
     back_share: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1.0)
     walk_speed: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.5)
-    heading_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.2)
+    heading_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
     turn_rate: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.0)
+    stand_turn_share: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.25)

@@ -32,10 +32,11 @@ transcription):
   chosen among people (bodies' repulsion included); walls act at once, after it.
 
 Defaults ``t_a`` = 1 s, ``a_a`` = 8, ``D_a`` = 0.1 m, ``τ`` = 0.3 s (JuPedSim 1.4's), ``b`` =
-0.2 m (a lane rule: with a few centimetres the mouths of ``examples/bidirectional.toml`` jam;
-docs/design/pedestrians.md), ``w`` = 0.1 m. Counter-flowing groups pass where the plain model
-jams head-on; in front of a narrow gap people step sideways and pass it slower than measured,
-so it is not the default (``bench/pedestrians.py --model anticipation``; docs/validation.md).
+0.1 m (a lane rule: with 0.05 m the mouths of ``examples/bidirectional.toml`` jam, with 0.2 m
+wide head-on fronts pass slower; docs/design/pedestrians.md), ``w`` = 0.1 m. Counter-flowing
+groups pass where the plain model jams head-on; in front of a narrow gap people step sideways
+and pass it slower than measured, so it is not the default (``bench/pedestrians.py --model
+anticipation``; docs/validation.md).
 """
 
 from __future__ import annotations
