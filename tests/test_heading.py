@@ -126,7 +126,7 @@ def test_a_standing_agent_turns_to_face_down_its_field():
     params, dt = AvoidanceParams(), 1 / 30
     step = jax.jit(pedestrian_step)
     before = np.asarray(peds.heading)
-    for _ in range(200):  # a standing body turns at a quarter of 3 rad/s
+    for _ in range(200):  # a standing body turns at 0.4 of 3 rad/s
         peds, info = step(params, world, peds, dt)
         after = np.asarray(peds.heading)
         turned = np.abs(np.remainder(after - before + np.pi, 2 * np.pi) - np.pi)
@@ -169,7 +169,7 @@ def test_a_walker_faces_where_it_walks_and_a_standing_one_its_goal():
     np.testing.assert_allclose(
         np.remainder(h[0], 2 * np.pi), math.atan2(v[0, 0], v[0, 1]), atol=1e-3
     )
-    for _ in range(120):  # standing, it turns at a quarter of the rate: π takes over 4 s
+    for _ in range(120):  # standing, it turns at 0.4 of the rate: π takes over 2.6 s
         peds, info = step(AvoidanceParams(), world, peds, 1 / 30)
     h = np.asarray(peds.heading)
     assert abs(np.remainder(h[1], 2 * np.pi) - math.pi) < 1e-3  # goal at −z: θ = π

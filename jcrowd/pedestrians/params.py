@@ -64,4 +64,4 @@ class AvoidanceParams(eqx.Module):
     walk_speed: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.5)
     heading_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
     turn_rate: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.0)
-    stand_turn_share: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.25)
+    stand_turn_share: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.4)
