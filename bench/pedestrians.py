@@ -37,6 +37,11 @@ Sections (``--sections``, default all):
   avoidance models and JuPedSim's collision-free speed and anticipation velocity models, from
   the same start.
 
+- ``bidirectional``: ``examples/bidirectional.toml`` (a corridor 4 m × 20 m fed with about
+  2 /s from each end for two minutes) run as ``jcrowd run`` runs it: people out, stuck,
+  ``spawn_late``, the time from the last one entering the corridor to the last one leaving it,
+  the share through within 30 s of that, density and speed in its middle 4 m.
+
 - ``plaza``: ``examples/plaza.toml`` with avoidance in the animated crowd step (its groups cross
   head-on and at right angles), for three times its longest free-walking route, with each
   avoidance model: safety, and each agent's arrival time ÷ its free-walking time.
@@ -63,6 +68,7 @@ bench/RESULTS.md and writes ``docs/pedestrians_fd.png`` and ``docs/pedestrians_b
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import re
 import sys
@@ -744,6 +750,76 @@ def counterflow(out):
         _plot_counterflow(snaps, g, shots)
 
 
+BIDIRECTIONAL_MOUTH_Z = 10.0  # m: the corridor of examples/bidirectional.toml is |z| < 10
+BIDIRECTIONAL_WIDTH = 4.0
+
+
+def bidirectional(out):
+    """``examples/bidirectional.toml`` as a user runs it (``jcrowd run --json``, the animated
+    crowd step, one device), measured from its recording: people out of the scene and
+    ``spawn_late`` (the run's own counts); ``stuck``, still in the scene at the end; entering
+    and leaving the corridor (crossing its near and far mouth in one's walking direction):
+    ``clear_s``, from the last one entering to the last one leaving it, and ``out_within_30s``,
+    the share of all people through the corridor within 30 s of the last one entering;
+    ``density_per_m2`` and ``speed_m_s`` in the corridor's middle 4 m (``|z| < 2``) over the
+    frames with somebody there; ``min_gap_ratio`` (closest pair ÷ (rᵢ + rⱼ), every tenth
+    frame)."""
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        rec_path = Path(tmp) / "run.npz"
+        cmd = [
+            sys.executable,
+            "-m",
+            "jcrowd.cli",
+            "run",
+            str(ROOT / "examples" / "bidirectional.toml"),
+        ]
+        run = subprocess.run(
+            [*cmd, "--json", "--out", str(rec_path)], capture_output=True, text=True
+        )
+        if run.returncode:
+            raise RuntimeError(run.stderr[-2000:])
+        summary = json.loads(run.stdout)
+        rec = dict(np.load(rec_path))
+    pos, alive, agent = rec["position"], rec["alive"], rec["agent"]
+    fps = float(rec["fps"])
+    north = rec["group"] == 0  # walking towards +z
+    z = np.where(north[None], pos[..., 1], -pos[..., 1])  # along one's own way
+    both = alive[1:] & alive[:-1]
+    entered, left = {}, {}
+    for mouth, seen in ((-BIDIRECTIONAL_MOUTH_Z, entered), (BIDIRECTIONAL_MOUTH_Z, left)):
+        f, s = np.nonzero(both & (z[:-1] < mouth) & (z[1:] >= mouth))
+        for fi, si in zip(f, s, strict=True):
+            seen[int(agent[fi + 1, si])] = (fi + 1) / fps
+    last_in = max(entered.values())
+    mid = alive & (np.abs(pos[..., 1]) < 2.0)
+    busy = mid.any(axis=1)
+    speed = np.linalg.norm(pos[1:] - pos[:-1], axis=-1) * fps
+    gaps = []
+    for f in range(0, len(pos), 10):
+        p = pos[f, alive[f]]
+        if len(p) > 1:
+            d = np.linalg.norm(p[:, None] - p[None], axis=-1) + 1e9 * np.eye(len(p))
+            gaps.append(d.min() / (2 * RADIUS))
+    people = summary["spawned"]
+    out["bidirectional"] = {
+        "people": people,
+        "out": summary["exited"],
+        "spawn_late": summary["spawn_late"],
+        "stuck": summary["alive_end"],
+        "clear_s": round(max(left.values()) - last_in, 1),
+        "out_within_30s": round(sum(t <= last_in + 30.0 for t in left.values()) / people, 3),
+        "density_per_m2": round(
+            float(mid[busy].sum(axis=1).mean() / (4.0 * BIDIRECTIONAL_WIDTH)), 2
+        ),
+        "speed_m_s": round(float(speed[(mid[1:] & mid[:-1])].mean()), 2),
+        "min_gap_ratio": round(float(min(gaps)), 3),
+    }
+    print(f"bidirectional: {out['bidirectional']}", file=sys.stderr, flush=True)
+
+
 def _plot_counterflow(snaps, g, shots):
     import matplotlib
 
@@ -938,6 +1014,17 @@ def _text(out):
                 f"bodies: standing facing p90 {out['standing_facing_deg']}°, "
                 f"turn rate p99 {out['heading_turn_rate_deg_s']}°/s",
             ]
+    if "bidirectional" in out:
+        b = out["bidirectional"]
+        lines += [
+            "",
+            "| bidirectional corridor | people | out | stuck | spawn_late | last in → last out s "
+            "| out within 30 s | middle ρ /m² | v m/s | min gap |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+            f"| jcrowd (anticipation) | {b['people']} | {b['out']} | {b['stuck']} | "
+            f"{b['spawn_late']} | {b['clear_s']} | {b['out_within_30s']} | {b['density_per_m2']} "
+            f"| {b['speed_m_s']} | {b['min_gap_ratio']} |",
+        ]
     if "fd" in out:
         lines += [
             "",
@@ -998,7 +1085,9 @@ def _text(out):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sections", default="bottleneck,counterflow,entrance,fd,plaza,speed")
+    ap.add_argument(
+        "--sections", default="bidirectional,bottleneck,counterflow,entrance,fd,plaza,speed"
+    )
     ap.add_argument("--hermes", type=Path, default=DATA / "hermes_uo")
     ap.add_argument("--widths", default="0.8,1.2,1.6,2.0,2.4")
     ap.add_argument("--sizes", default="1000,10000,50000,100000")
@@ -1031,6 +1120,8 @@ def main() -> None:
         fd(args.hermes, out)
     if "counterflow" in sections:
         counterflow(out)
+    if "bidirectional" in sections:
+        bidirectional(out)
     if "plaza" in sections:
         for model in ("anticipation", "collision-free-speed"):
             plaza(out, model)
