@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from jcrowd import load_default_model
-from jcrowd.crowd import aim_point, prepare, turn_towards
+from jcrowd.crowd import aim_point, prepare
 from jcrowd.scenario import parse_scenario
 
 COUNTERFLOW = """
@@ -43,18 +43,6 @@ goal = {{ shape = "rect", center = [0, -17], size = [8, 3] }}
 avoid = {avoid}
 model = "{model}"
 """
-
-
-def test_turn_towards_is_rate_limited_and_takes_the_short_way():
-    dt = jnp.float32(0.1)  # at most 0.3 rad per step at 3 rad/s
-    heading = jnp.asarray([0.0, 0.0, 3.0, 0.0], jnp.float32)
-    vx = jnp.asarray([1.0, 0.1, -0.1, 0.0], jnp.float32)  # east; nearly north; ...; still
-    vz = jnp.asarray([0.0, 1.0, -1.0, 0.0], jnp.float32)
-    got = np.asarray(turn_towards(heading, vx, vz, dt))
-    want_1 = np.arctan2(0.1, 1.0)  # within the limit: straight there
-    # 3.0 rad to atan2(−0.1, −1) = −3.04 rad: 0.24 rad the short way across ±π, not 6 rad back.
-    across = 3.0 + (np.arctan2(-0.1, -1.0) + 2 * np.pi - 3.0)
-    np.testing.assert_allclose(got, [0.3, want_1, across, 0.0], atol=1e-6)
 
 
 def test_aim_point_extrapolates_the_velocity():

@@ -39,10 +39,8 @@ from jcrowd.crowd.state import Frame as Frame
 from jcrowd.crowd.state import StepConfig as StepConfig
 from jcrowd.crowd.state import init_state as init_state
 from jcrowd.crowd.state import refresh_far_cores as refresh_far_cores
-from jcrowd.crowd.steering import TURN_RATE as TURN_RATE
 from jcrowd.crowd.steering import aim_point as aim_point
 from jcrowd.crowd.steering import current_field as current_field
-from jcrowd.crowd.steering import turn_towards as turn_towards
 from jcrowd.crowd.steering import walk as walk
 from jcrowd.crowd.steering import waypoint_xz as waypoint_xz
 from jcrowd.crowd.stepping import bucket_chunk as bucket_chunk

@@ -6,8 +6,7 @@ alive agent — towards its current waypoint, down the waypoint's navigation fie
 among its neighbours — and the root moves by ``v·dt``. The body faces the step's heading
 (:mod:`jcrowd.pedestrians.heading`: towards the walking direction, the waypoint's when standing
 or shuffling, at a bounded turn rate), and the next gait cycle is chosen from the velocity
-(:func:`aim_point`), so the clips follow the simulated path. :func:`turn_towards` is the
-velocity-only rule, for callers without the dynamics' heading.
+(:func:`aim_point`), so the clips follow the simulated path.
 """
 
 from __future__ import annotations
@@ -25,23 +24,12 @@ from jcrowd.pedestrians.step import Pedestrians, pedestrian_step
 from jcrowd.pedestrians.world import World, open_world
 
 __all__ = [
-    "TURN_RATE",
     "aim_point",
     "current_field",
     "due_rows",
-    "turn_towards",
     "walk",
     "waypoint_xz",
 ]
-
-TURN_RATE = 3.0
-"""Largest body turn rate (rad/s) when the heading follows the velocity."""
-
-TURN_FULL_SPEED = 0.8
-"""From this speed (m/s) up the body turns at up to :data:`TURN_RATE` (:func:`turn_towards`)."""
-
-TURN_SLOW_SHARE = 0.1
-"""The share of :data:`TURN_RATE` a walker keeps however slowly it moves."""
 
 SELECT_WAYPOINTS = 8
 """Up to this many waypoints per agent, the current one is picked by selects (vectorized);
@@ -128,24 +116,6 @@ def due_rows(
     turn = jnp.remainder(tick + jnp.arange(n, dtype=jnp.int32), every) == 0
     (rows,) = jnp.nonzero(near | turn, size=size, fill_value=n)
     return rows.astype(jnp.int32)
-
-
-def turn_towards(heading: Array, vx: Array, vz: Array, dt: Array, min_speed: float = 0.05) -> Array:
-    """The heading turned towards the velocity's direction by at most ``TURN_RATE·dt`` times
-    ``clip(speed / TURN_FULL_SPEED, TURN_SLOW_SHARE, 1)`` (unchanged while the agent is slower
-    than ``min_speed`` m/s).
-
-    A slow walker turns slowly: in a dense queue the simulated velocity's direction swings from
-    step to step as neighbours push, and a body chasing it at the full rate would swing its
-    planted foot round; people shuffling in a queue sidestep rather than turn.
-    """
-    want = jnp.arctan2(vx, vz)  # heading θ faces (sin θ, cos θ)
-    diff = jnp.remainder(want - heading + jnp.pi, 2 * jnp.pi) - jnp.pi
-    speed = jnp.sqrt(vx * vx + vz * vz)
-    limit = TURN_RATE * dt * jnp.clip(speed / TURN_FULL_SPEED, TURN_SLOW_SHARE, 1.0)
-    turn = jnp.clip(diff, -limit, limit)
-    moving = vx * vx + vz * vz > min_speed * min_speed
-    return jnp.where(moving, heading + turn, heading)
 
 
 def aim_point(
