@@ -59,6 +59,7 @@ from jcrowd.crowd.state import CrowdState, Frame, StepConfig, refresh_far_cores
 from jcrowd.crowd.steering import walk
 from jcrowd.crowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
 from jcrowd.motion.fastmath import sincos
+from jcrowd.pedestrians.heading import smoothstep
 from jcrowd.pedestrians.world import World
 
 __all__ = [
@@ -92,11 +93,6 @@ def default_capacities(agents: int, levels: int) -> tuple[int, ...]:
     return tuple(min(agents, c) for c in (*caps, BUDGET_LAST))
 
 
-def _smoothstep(x: Array) -> Array:
-    x = jnp.clip(x, 0.0, 1.0)
-    return x * x * (3.0 - 2.0 * x)
-
-
 def _agent_level(
     cm: CrowdModel,
     level: int,
@@ -127,7 +123,7 @@ def _agent_level(
     def pose(tau: Array) -> Array:
         g = coeffs_at(lv, core, tau)
         if near:
-            s = jnp.where(state.has_next[i], _smoothstep((tau - last / 2) / (last / 2)), 0.0)
+            s = jnp.where(state.has_next[i], smoothstep((tau - last / 2) / (last / 2)), 0.0)
             g = g + s * (coeffs_at(lv, core_next, tau) - g)
         return pose_from_coeffs(lv, g)
 
