@@ -338,13 +338,15 @@ def _move_roots(
     facing: Array | None,
 ) -> CrowdState:
     """Stage 5: the roots of the agents alive at the step's start move — by ``v·dt`` with the
-    dynamics, the body taking their heading (``facing``), else by the decoded or dead-reckoned
-    motion — and the phase advances."""
+    dynamics, the body taking their heading (``facing``) unless it stands in double support,
+    else by the decoded or dead-reckoned motion — and the phase advances."""
     dtau, dyaw, dx, dz = motion
     vx, vz = state.vx, state.vz  # the dynamics' output; without them it stays as it was
     if config.avoid and facing is not None:
         dx, dz = vx * dt, vz * dt
-        heading = facing
+        # A body standing in double support keeps its heading: turning would slide its planted
+        # feet (turning on the spot is stepping, which the clips do not hold).
+        heading = jnp.where(state.stands, state.heading, facing)
     else:
         heading = state.heading + dyaw
     moved = (
