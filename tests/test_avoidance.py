@@ -1,8 +1,9 @@
 """The collision-free speed model (jcrowd.pedestrians.avoidance) against a NumPy transcription.
 
 The oracle below is the model's four equations (Tordeux, Chraibi & Seyfried 2016, Eqs. 1–4;
-walls as the module docstring reads them) written as plain float64 loops over every other agent
-and every wall, without the candidate lists, padding or masks of the JAX version.
+walls and, with last velocities, the standing rule as the module docstring reads them) written
+as plain float64 loops over every other agent and every wall, without the candidate lists,
+padding or masks of the JAX version.
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ from jcrowd.pedestrians import (
 
 A, D, AW, DW, T = 8.0, 0.1, 5.0, 0.02, 0.6
 SHARP, LAMBDA, SLIDE = 4.0, 0.3, 0.1  # V's sharpness n, the anisotropy λ, the slide reach m
+DRIVE, GO = 0.7, 2.0  # c and v_go of the standing rule (with a last velocity)
+STANDING = AvoidanceParams(stand_drive=DRIVE, go_speed=GO)  # the rule on (off by default)
 
 
 def _oracle(pos, desired, speed, radius, walls):
@@ -83,16 +86,29 @@ def _speed(v0, gap):
     return v0 * x / (1 + x**SHARP) ** (1 / SHARP) if np.isfinite(x) else v0
 
 
-def _walls_then_speed(i, e, pos, speed, radius, walls):
-    """Agent ``i``'s direction ``e`` plus the walls' repulsion, normalised (Eq. 4's end), then
-    its spacing and speed along it (Eqs. 2–3): ``(velocity, spacing)``."""
-    e = np.array(e, np.float64)
+def _wall_push(i, pos, radius, walls):
+    """Eq. (4)'s walls: each repels ``i`` by ``a_w e^{(r_i − d)/D_w}`` along its normal."""
+    push = np.zeros(2)
     for a, b in walls:
         t = np.clip(np.dot(pos[i] - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
         d = pos[i] - (a + t * (b - a))
         s = np.hypot(*d)
-        e += AW * np.exp((radius[i] - s) / DW) * d / s
-    return _speed_along(i, e / np.hypot(*e), pos, speed, radius, walls)
+        push += AW * np.exp((radius[i] - s) / DW) * d / s
+    return push
+
+
+def _walls_then_speed(i, e, pos, speed, radius, walls, own=None, drive_sum=None):
+    """Agent ``i``'s direction ``e`` plus the walls' repulsion, normalised (Eq. 4's end), then
+    its spacing and speed along it (Eqs. 2–3): ``(velocity, spacing)``. Given its last velocity
+    ``own``, the speed is times ``min(1, ‖E‖/c + ‖own‖/v_go)``, ``E`` the unnormalised sum
+    (``drive_sum`` plus the walls; by default ``e``'s)."""
+    walls_push = _wall_push(i, pos, radius, walls)
+    e = np.array(e, np.float64) + walls_push
+    raw = e if drive_sum is None else np.asarray(drive_sum) + walls_push
+    v, gap = _speed_along(i, e / np.hypot(*e), pos, speed, radius, walls)
+    if own is None:
+        return v, gap
+    return v * min(1.0, np.hypot(*raw) / DRIVE + np.hypot(*own) / GO), gap
 
 
 def _speed_along(i, e, pos, speed, radius, walls):
@@ -182,6 +198,106 @@ def test_closed_forms():
         )
         # 1e-4: the hand-worked values are rounded to 4 decimals.
         np.testing.assert_allclose(np.asarray(v)[0], [0.0, want], atol=1e-4)
+
+
+def _standing(pos, params=None):
+    """Velocities of people standing (last velocity 0) at ``pos``, all wanting +z at 1.3 m/s
+    (r = 0.2 m), by the plain model with its reaction time at Δt = τ_p (so the velocity is
+    the model's own, not relaxed), every other one a candidate, no walls."""
+    n = len(pos)
+    cand = jnp.asarray([[j for j in range(n) if j != i] for i in range(n)], jnp.int32)
+    motion = Motion(jnp.zeros((n, 2), jnp.float32), None, jnp.float32(TAU_PLAIN))
+    v, _ = avoid(
+        STANDING if params is None else params,
+        jnp.asarray(pos, jnp.float32),
+        jnp.tile(jnp.asarray([0.0, 1.0], jnp.float32), (n, 1)),
+        jnp.full(n, 1.3, jnp.float32),
+        jnp.full(n, 0.2, jnp.float32),
+        cand,
+        jnp.zeros((0, 2, 2), jnp.float32),
+        jnp.zeros((n, 0), jnp.int32),
+        motion=motion,
+    )
+    return np.asarray(v)
+
+
+def test_a_person_behind_another_stands_where_desire_and_repulsion_cancel():
+    """The standing rule on two people in a line, the back one standing: its net drive is
+    ``E = 1 − a e^{−g/D}`` (a neighbour straight ahead weighs 1), its speed ``V(g) min(1,
+    |E|/c)`` forward, or ``v0 min(1, |E|/c)`` backing off with nobody behind. By hand:
+    g = 0.25 m → R = 0.6567, E = 0.3433, V = 0.4156, v = 0.2038 m/s; g = 0.18 m → R = 1.3224,
+    E = −0.3224, v = −0.5987 m/s; at g* = D ln a = 0.20794 m it stands. Without the rule
+    (``stand_drive`` 0, the default) it walks at the full V(0.25) = 0.4156 m/s."""
+    for gap, want in ((0.25, 0.2038), (0.18, -0.5987), (0.1 * np.log(8.0), 0.0)):
+        v = _standing([[0.0, 0.0], [0.0, 0.4 + gap]])
+        np.testing.assert_allclose(v[0], [0.0, want], atol=2e-4)
+    v = _standing([[0.0, 0.0], [0.0, 0.65]], AvoidanceParams())
+    np.testing.assert_allclose(v[0], [0.0, 0.4156], atol=2e-4)
+
+
+def test_a_walking_person_follows_as_the_paper_says():
+    """The rule's share ``min(1, ‖E‖/c + ‖v'‖/v_go)``: walking at v_go = 2 m/s the share is 1,
+    and the person 0.25 m behind another walks at the paper's V(0.25) = 0.4156 m/s (standing,
+    0.2038: the test above)."""
+    n, g = 2, 0.25
+    cand = jnp.asarray([[1], [0]], jnp.int32)
+    own = jnp.asarray([[0.0, 2.0], [0.0, 0.0]], jnp.float32)
+    v, _ = avoid(
+        STANDING,
+        jnp.asarray([[0.0, 0.0], [0.0, 0.4 + g]], jnp.float32),
+        jnp.tile(jnp.asarray([0.0, 1.0], jnp.float32), (n, 1)),
+        jnp.full(n, 1.3, jnp.float32),
+        jnp.full(n, 0.2, jnp.float32),
+        cand,
+        jnp.zeros((0, 2, 2), jnp.float32),
+        jnp.zeros((n, 0), jnp.int32),
+        motion=Motion(own, None, jnp.float32(TAU_PLAIN)),
+    )
+    np.testing.assert_allclose(np.asarray(v)[0], [0.0, 0.4156], atol=2e-4)
+
+
+def test_the_middle_of_three_stands_where_front_and_back_balance():
+    """Three standing in a line: the middle one is pushed back by the front one (weight 1) and
+    forward by the back one (weight λ = 0.3), ``E = 1 − R(g_f) + λ R(g_b)``. With g_b = 0.1 m,
+    ``R(g_b) = 8/e = 2.9430``, the balance is at ``R(g_f) = 1.8829``, g_f = 0.14466 m: it
+    stands (|v| below 1 mm/s). 2 cm farther forward, ``E = 1 − 8e^{−1.6466} + 0.8829 =
+    0.3412`` and it walks at ``V(0.16466) · 0.3412/0.7``."""
+    for gf, want in ((0.14466, 0.0), (0.16466, 0.3412 / 0.7)):
+        v = _standing([[0.0, -0.5], [0.0, 0.0], [0.0, 0.4 + gf]])
+        x = gf / (1.3 * 0.6)
+        free = 1.3 * x / (1 + x**4) ** 0.25
+        np.testing.assert_allclose(v[1], [0.0, want * free], atol=1e-3)
+
+
+def test_a_queue_settles_instead_of_stepping_forward_and_back():
+    """A person 0.5 m behind a standing one, stepped at 30 Hz by the plain model with its
+    reaction time as the crowd steps it: the gap closes to the balance g* = D ln a and stays
+    (within 2 mm over the last 2 s, overshooting by under 1 cm on the way). With the paper's
+    normalised Eq. (4) (``stand_drive`` 0, the default) the same person steps forward and back
+    around g* for as long as it runs."""
+
+    def gaps(params):
+        pos = jnp.asarray([[0.0, 0.0], [0.0, 0.9]], jnp.float32)
+        desired = jnp.asarray([[0.0, 1.0], [0.0, 1.0]], jnp.float32)
+        speed = jnp.asarray([1.3, 0.0], jnp.float32)  # the front one stands
+        radius = jnp.full(2, 0.2, jnp.float32)
+        cand = jnp.asarray([[1], [0]], jnp.int32)
+        walls, wall_ids = jnp.zeros((0, 2, 2)), jnp.zeros((2, 0), jnp.int32)
+        v = jnp.zeros((2, 2), jnp.float32)
+        out = []
+        for _ in range(180):
+            motion = Motion(v, None, jnp.float32(1 / 30))
+            v, _ = avoid(params, pos, desired, speed, radius, cand, walls, wall_ids, motion=motion)
+            pos = pos + v / 30.0
+            out.append(float(pos[1, 1] - pos[0, 1]) - 0.4)
+        return np.array(out)
+
+    g_star = 0.1 * np.log(8.0)
+    calm = gaps(STANDING)
+    assert np.all(np.abs(calm[-60:] - g_star) < 2e-3)
+    assert calm.min() > g_star - 0.01
+    restless = gaps(AvoidanceParams())
+    assert np.ptp(restless[-60:]) > 0.01
 
 
 def test_a_wall_turns_an_agent_walking_into_it():
@@ -361,12 +477,13 @@ def _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt):
             weight = ahead * against * min(1.0, vj / WALKING)
             strength = AA * np.exp((radius[i] + radius[j] - np.hypot(*p)) / DA)
             e += weight * strength * np.tanh((np.dot(p, right) + KEEP) / WIDTH) * right
+        raw = e.copy()
         e /= np.hypot(*e)
         sp = np.hypot(*vel[i])
         prev = vel[i] / sp if sp > 0.05 else e
         e = prev + (e - prev) * min(1.0, dt / TAU)
         e /= np.hypot(*e)
-        vel_out[i], gaps[i] = _walls_then_speed(i, e, pos, speed, radius, walls)
+        vel_out[i], gaps[i] = _walls_then_speed(i, e, pos, speed, radius, walls, vel[i], raw)
     return vel_out, gaps
 
 
@@ -399,7 +516,7 @@ def test_anticipating_velocities_equal_the_reading(seed):
     want_v, _ = _oracle_anticipating(pos, desired, speed, radius, walls, vel, dt)
     f32, cand, wall_ids = _every_pair(pos, desired, speed, radius, walls, vel)
     motion = Motion(f32[5], f32[5], dt)
-    got_v, _ = avoid(AvoidanceParams(), *f32[:4], cand, f32[4], wall_ids, motion=motion)
+    got_v, _ = avoid(STANDING, *f32[:4], cand, f32[4], wall_ids, motion=motion)
     np.testing.assert_allclose(np.asarray(got_v), want_v, atol=1e-4)
     plain, _ = avoid(AvoidanceParams(), *f32[:4], cand, f32[4], wall_ids)
     # Premise: anticipation changes these scenes (by more than the tolerance, many times over).
@@ -411,13 +528,13 @@ TAU_PLAIN = 0.1  # s: the plain model's reaction time
 
 def _oracle_reacting(pos, desired, speed, radius, walls, vel, dt):
     """The plain model with a reaction time, float64 loops: the paper's velocity (Eqs. 1–4,
-    walls included) relaxed from the last one by ``min(1, dt/τ_p)`` with ``τ_p = 0.1`` s, and
-    no faster than Eqs. (2)–(3) allow along the relaxed direction."""
+    walls and the standing rule included) relaxed from the last one by ``min(1, dt/τ_p)`` with
+    ``τ_p = 0.1`` s, and no faster than Eqs. (2)–(3) allow along the relaxed direction."""
     n = len(pos)
     vel_out, gaps = np.zeros((n, 2)), np.full(n, np.inf)
     for i in range(n):
         e = _desire_and_bodies(i, desired, pos, radius, walls)
-        paper, _ = _walls_then_speed(i, e / np.hypot(*e), pos, speed, radius, walls)
+        paper, _ = _walls_then_speed(i, e, pos, speed, radius, walls, vel[i])
         relaxed = vel[i] + (paper - vel[i]) * min(1.0, dt / TAU_PLAIN)
         d = relaxed / np.hypot(*relaxed)
         allowed, gaps[i] = _speed_along(i, d, pos, speed, radius, walls)
@@ -438,11 +555,11 @@ def test_plain_model_with_a_reaction_time_equals_the_loops(seed):
     want_v, _ = _oracle_reacting(pos, desired, speed, radius, walls, vel, dt)
     f32, cand, wall_ids = _every_pair(pos, desired, speed, radius, walls, vel)
     motion = Motion(f32[5], None, dt)
-    got_v, _ = avoid(AvoidanceParams(), *f32[:4], cand, f32[4], wall_ids, motion=motion)
+    got_v, _ = avoid(STANDING, *f32[:4], cand, f32[4], wall_ids, motion=motion)
     np.testing.assert_allclose(np.asarray(got_v), want_v, atol=1e-4)
-    jitted = jax.jit(
-        lambda *a: avoid(AvoidanceParams(), *a, motion=Motion(f32[5], None, jnp.float32(dt)))
-    )(*f32[:4], cand, f32[4], wall_ids)[0]
+    jitted = jax.jit(lambda *a: avoid(STANDING, *a, motion=Motion(f32[5], None, jnp.float32(dt))))(
+        *f32[:4], cand, f32[4], wall_ids
+    )[0]
     np.testing.assert_allclose(np.asarray(jitted), np.asarray(got_v), atol=1e-6)
     plain, _ = avoid(AvoidanceParams(), *f32[:4], cand, f32[4], wall_ids)
     assert np.abs(np.asarray(plain) - want_v).max() > 1e-2  # premise: the relaxation acts
@@ -461,7 +578,7 @@ def test_a_relaxed_velocity_towards_a_neighbour_is_capped_along_its_own_directio
     want_v, want_gap = _oracle_reacting(pos, desired, speed, radius, walls, vel, 1 / 30)
     f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, vel)]
     got, gap = avoid(
-        AvoidanceParams(),
+        STANDING,
         *f32[:4],
         jnp.asarray([[1], [0]], jnp.int32),
         jnp.zeros((0, 2, 2)),
@@ -492,7 +609,7 @@ def test_anticipating_overlapping_bodies_equal_the_reading():
     f32 = [jnp.asarray(x, jnp.float32) for x in (pos, desired, speed, radius, vel)]
     cand = jnp.asarray([[j for j in range(8) if j != i] for i in range(8)], jnp.int32)
     got, _ = avoid(
-        AvoidanceParams(),
+        STANDING,
         *f32[:4],
         cand,
         jnp.zeros((0, 2, 2)),
@@ -530,12 +647,13 @@ def test_a_neighbour_walking_the_same_way_is_followed_not_stepped_around():
     args = [jnp.asarray(x, jnp.float32) for x in (pos, desired, [1.3, 1.3], [0.2, 0.2])]
     cand = jnp.asarray([[1], [0]], jnp.int32)
     walls, wall_ids = jnp.zeros((0, 2, 2)), jnp.zeros((2, 1), jnp.int32)
-    plain, _ = avoid(AvoidanceParams(), *args, cand, walls, wall_ids)
+    params = AvoidanceParams()  # the standing rule, which reads the velocity too, off
+    plain, _ = avoid(params, *args, cand, walls, wall_ids)
     mine = jnp.asarray([[0.0, 1.3]], jnp.float32)
     for other, same in (([0.0, 1.3], True), ([0.0, 0.0], True), ([0.0, -1.3], False)):
         v = jnp.concatenate([mine, jnp.asarray([other], jnp.float32)])
         # dt = τ: no relaxation from the last direction, so only the sideways term differs.
-        got, _ = avoid(AvoidanceParams(), *args, cand, walls, wall_ids, motion=Motion(v, v, 0.3))
+        got, _ = avoid(params, *args, cand, walls, wall_ids, motion=Motion(v, v, 0.3))
         close = np.allclose(np.asarray(got)[0], np.asarray(plain)[0], atol=1e-6)
         assert close == same, (other, np.asarray(got)[0], np.asarray(plain)[0])
 

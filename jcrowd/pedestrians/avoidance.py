@@ -1,7 +1,6 @@
-"""Local avoidance: the collision-free speed model (Tordeux, Chraibi & Seyfried 2016).
-
-A. Tordeux, M. Chraibi, A. Seyfried, "Collision-free speed model for pedestrian dynamics",
-Traffic and Granular Flow '15 (Springer 2016), 225–232 (arXiv:1512.05597). A first-order model:
+"""Local avoidance: the collision-free speed model of A. Tordeux, M. Chraibi, A. Seyfried,
+"Collision-free speed model for pedestrian dynamics", Traffic and Granular Flow '15 (Springer
+2016), 225–232 (arXiv:1512.05597), a first-order model:
 
 - Eq. (1)  ``ẋ_i = V(s_i) e_i``;
 - Eq. (2)  ``V(s) = min(v0_i, max(0, (s − ℓ) / T))``, time gap ``T``, agent size ``ℓ``;
@@ -12,27 +11,28 @@ Traffic and Granular Flow '15 (Springer 2016), 225–232 (arXiv:1512.05597). A f
 
 Readings taken as JuPedSim's implementation does: radii, ``ℓ_ij = r_i + r_j``; walls repel in
 Eq. (4) like a neighbour, ``a_w exp((r_i − d)/D_w)`` along the normal from the wall's closest
-point. Four changes of ours, each for a failure of the paper's model on the experiments of
-``bench/pedestrians.py`` (docs/validation.md has today's figures, docs/design/pedestrians.md
-the measurements behind each):
+point. Five changes of ours, each for a failure of the paper's model on the experiments of
+``bench/pedestrians.py`` (docs/validation.md: figures; docs/design/pedestrians.md: the trials):
 
 - **A smooth Eq. (2)**: ``V(s) = v0 x / (1 + x^n)^{1/n}``, ``x = (s − ℓ)/(v0 T)``, ``n`` = 4:
-  the same slope ``1/T`` at contact and free speed, never above the paper's ``V`` (the
-  collision-free bound holds), the paper's as ``n → ∞``. The paper's triangular
-  speed–density relation leaves the fed HERMES corridors far too thin and fast. Differentiable.
+  slope ``1/T`` at contact, never above the paper's ``V`` (the collision-free bound holds),
+  the paper's as ``n → ∞``; its triangular ``V`` leaves the fed HERMES corridors too thin.
 - **Anisotropic repulsion**: ``j`` repels ``i`` with weight ``λ + (1 − λ)(1 + cos φ_ij)/2``,
-  ``φ_ij`` between ``e_i^0`` and ``x_j − x_i`` (social-force models' anisotropy), ``λ`` = 0.3:
-  isotropic, a crowd pressing from behind forms arches at a narrow exit that never break.
-- **Walls in Eq. (3)**: a wall segment ahead, within ``r_i`` of the walking line, limits the
-  speed like a neighbour of size 0 at its closest point, so an agent walking into a door's
-  corner stops instead of oscillating against ``D_w``'s stiff repulsion.
+  ``φ_ij`` between ``e_i^0`` and ``x_j − x_i``, ``λ`` = 0.3: isotropic, a crowd pressing from
+  behind forms arches at a narrow exit that never break.
+- **Walls in Eq. (3)**: a wall ahead within ``r_i`` of the walking line limits the speed like a
+  neighbour of size 0 at its closest point (no oscillating against ``D_w``'s stiff wall).
 - **Sliding along walls**: ``e^0 ← u(e^0 − w min(0, e^0·n) n)``, ``n`` the normal of the wall
-  pressed into most, ``w = clip((r_i + m − d)/m, 0, 1)``, ``m`` = 0.1 m: a navigation path is a
-  point's, and beside a corner it points into the wall for a body of radius ``r``.
+  pressed into most, ``w = clip((r_i + m − d)/m, 0, 1)``, ``m`` = 0.1 m.
+- **Standing where desire and repulsion cancel** (opt-in, given last velocities ``v'``): speed
+  ``V(s) min(1, ‖E‖/c + ‖v'‖/v_go)``, ``E`` the sum Eq. (4) normalises (walls, anticipation's
+  step included; a free walker's ``‖E‖`` is 1), ``c`` = ``stand_drive``, ``v_go`` = 2 m/s.
+  Normalised, ``E`` walks at full ``V`` whichever way it tips, so a queue steps forward and
+  back; with ``c`` = 0.7 the Wuppertal entrance's queue is as calm as measured, but the jammed
+  HERMES corridors and the bidirectional example stand too still, so ``c`` = 0 (off) by default.
 
-With the last velocities: :mod:`~jcrowd.pedestrians.reaction`, :mod:`~jcrowd.pedestrians.
-heading`. Eq. (4) and ``V`` are smooth; the spacing is a minimum over a set the direction
-decides and the slide picks one wall: the gradient jumps where those change.
+More with them: :mod:`~jcrowd.pedestrians.reaction`, :mod:`~jcrowd.pedestrians.heading`. Eq. (4)
+and ``V`` are smooth; the gradient jumps where Eq. (3)'s set, the slid wall or ``min`` change.
 
 Positions ``[x, z]`` in metres, velocities m/s; neighbours as candidate ids (``N``: none),
 walls as segments ``(S, 2, 2)`` with candidate ids (``S``: none), through the grid in
@@ -224,16 +224,19 @@ def avoid_rows(
     push = push * _behind_weight(params, -(dx * desired[:, 0:1] + dz * desired[:, 1:2]) * inv)
     ex = desired[:, 0] + jnp.sum(push * dx, axis=1)
     ez = desired[:, 1] + jnp.sum(push * dz, axis=1)
+    wpush = params.wall_strength * jnp.exp((radius[:, None] - wd) / params.wall_range)
+    wpush = jnp.where(wvalid, wpush, 0.0) * winv
+    wall_x, wall_z = jnp.sum(wpush * wx, axis=1), jnp.sum(wpush * wz, axis=1)
     if motion is not None and motion.crowd is not None:
         vj = (rows[..., 3], rows[..., 4])
         sx, sz = sideways(params, desired, motion, vj, valid, dx, dz, inv, size)
+        ex, ez = ex + sx, ez + sz
+    # A person whose desire and repulsion cancel stands (module docstring).
+    drive = 1.0 if motion is None else _drive(params, ex + wall_x, ez + wall_z, motion.own)
+    if motion is not None and motion.crowd is not None:
         # The reaction time relaxes the direction people choose; walls act at once.
-        ex, ez = react(params.reaction_time, motion, *_unit_xz(ex + sx, ez + sz))
-    wpush = params.wall_strength * jnp.exp((radius[:, None] - wd) / params.wall_range)
-    wpush = jnp.where(wvalid, wpush, 0.0) * winv
-    ex = ex + jnp.sum(wpush * wx, axis=1)
-    ez = ez + jnp.sum(wpush * wz, axis=1)
-    ex, ez = _unit_xz(ex, ez)
+        ex, ez = react(params.reaction_time, motion, *_unit_xz(ex, ez))
+    ex, ez = _unit_xz(ex + wall_x, ez + wall_z)
 
     def spacing(ex: Array, ez: Array) -> Array:
         """Eq. (3) along ``(ex, ez)``, walls ahead as neighbours of size 0 at their closest
@@ -251,7 +254,7 @@ def avoid_rows(
         return gap
 
     gap = spacing(ex, ez)
-    v = optimal_velocity(params, speed, gap)
+    v = optimal_velocity(params, speed, gap) * drive
     if motion is not None and motion.facing is not None:  # a body walks along its heading
         v = body_speed(params, ex, ez, v, motion.facing)
     if motion is not None and motion.crowd is None:  # the plain model with its reaction time
@@ -295,6 +298,16 @@ def approach_cap(
     rate = 2.0 * h * cos
     limit = jnp.maximum(gap, 0.0) / jnp.maximum(rate, _TINY)
     return jnp.min(jnp.where(valid & (cos > 0.0), limit, jnp.inf), axis=1)
+
+
+def _drive(params: AvoidanceParams, ex: Array, ez: Array, own: Array) -> Array:
+    """The share of the speed the unnormalised Eq. (4) sum ``E = (ex, ez)`` leaves an agent
+    whose last velocity is ``own``: ``min(1, ‖E‖/c + ‖v'‖/v_go)``, 1 with ``c`` = 0 (module
+    docstring)."""
+    norm = jnp.sqrt(ex * ex + ez * ez + _TINY * _TINY)
+    sp = jnp.sqrt(own[:, 0] ** 2 + own[:, 1] ** 2 + _TINY * _TINY)
+    share = norm / jnp.maximum(params.stand_drive, _TINY) + sp / params.go_speed
+    return jnp.where(params.stand_drive > 0.0, jnp.minimum(1.0, share), 1.0)
 
 
 def _behind_weight(params: AvoidanceParams, cos: Array) -> Array:

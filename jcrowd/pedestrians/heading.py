@@ -15,14 +15,15 @@ Seyfried 2021; Farina et al. 2017):
    ``τ_h`` and turns at most ``ω (s + (1 − s) w)`` rad/s: ``θ ← θ + clip(Δ min(1, Δt/τ_h),
    ±ω (s + (1 − s) w) Δt)``, ``Δ`` the wrapped angle to ``t``. Willems et al. (Sci. Rep. 2020)
    measured the walking direction following the body's with about 100 ms delay; ``τ_h`` =
-   0.2 s, ``ω`` = 3 rad/s, ``v_walk`` = 0.5 m/s. A standing body turns at ``s`` = 0.4 of that:
+   0.1 s, ``ω`` = 3 rad/s, ``v_walk`` = 0.5 m/s. A standing body turns at ``s`` = 0.4 of that:
    its feet stay planted while it turns, so a faster turn slides them.
 2. **Walking mostly along the heading** (``back_share`` ``b`` < 1): the model's speed ``V``
    (Eq. 2) is scaled by ``f = b + (1 − b) ((1 + cos φ)/2)²``, ``φ`` between the chosen
    direction and the heading: 1 ahead, ``(1 + 3b)/4`` to the side, ``b`` straight back; only
    lowered, so the collision-free bound holds. Off by default (``b`` = 1): on the Wuppertal
    entrance ``b`` = 0.25 halves the queue's moving frames but cuts the flow by a sixth, below
-   the measurement's band (docs/design/pedestrians.md).
+   the measurement's band; what calms the queue is the avoidance's standing rule
+   (:mod:`jcrowd.pedestrians.avoidance`; docs/design/pedestrians.md).
 
 Rule 2 acts where the model's velocity is chosen (with the last velocities,
 :class:`~jcrowd.pedestrians.reaction.Motion`), before the plain model's reaction time relaxes

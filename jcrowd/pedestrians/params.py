@@ -1,11 +1,12 @@
 """The pedestrian models' parameters, one traced pytree (:class:`AvoidanceParams`).
 
 The collision-free speed model's (:mod:`jcrowd.pedestrians.avoidance`, Tordeux, Chraibi &
-Seyfried 2016, Eqs. 2 and 4, with our smooth ``V``, anisotropy and wall slide) and the reaction
-time and anticipation model's (:mod:`jcrowd.pedestrians.reaction`). The defaults of ``a``,
-``D``, ``a_w``, ``D_w``, ``t_a``, ``a_a``, ``D_a`` and ``τ`` are JuPedSim 1.4's; ``T``, ``n``,
-``λ``, ``m``, ``τ_p`` and the heading's (:mod:`jcrowd.pedestrians.heading`) are ours, validated
-in ``bench/pedestrians.py`` (docs/validation.md). Every field is an array, so a changed value
+Seyfried 2016, Eqs. 2 and 4, with our smooth ``V``, anisotropy, wall slide and standing rule)
+and the reaction time and anticipation model's (:mod:`jcrowd.pedestrians.reaction`). The
+defaults of ``a``, ``D``, ``a_w``, ``D_w``, ``t_a``, ``a_a``, ``D_a`` and ``τ`` are JuPedSim
+1.4's; ``T``, ``n``, ``λ``, ``m``, ``c``, ``v_go``, ``τ_p`` and the heading's
+(:mod:`jcrowd.pedestrians.heading`) are ours, validated in ``bench/pedestrians.py``
+(docs/validation.md). Every field is an array, so a changed value
 (a calibration, a gradient step) never recompiles.
 """
 
@@ -43,6 +44,10 @@ class AvoidanceParams(eqx.Module):
         heading_time: ``τ_h`` (s) over which the heading relaxes.
         turn_rate: ``ω`` (rad/s), the fastest the heading turns.
         stand_turn_share: the share of ``ω`` a standing body turns at.
+        stand_drive: ``c``, the net drive ``‖E‖`` of Eq. (4) below which a standing person
+            slows in proportion (:mod:`jcrowd.pedestrians.avoidance`; a free walker's is 1);
+            0 (the default) turns the rule off.
+        go_speed: ``v_go`` (m/s), the last speed at which that slowing is gone.
     """
 
     strength: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.0)
@@ -65,3 +70,5 @@ class AvoidanceParams(eqx.Module):
     heading_time: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.1)
     turn_rate: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.0)
     stand_turn_share: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.4)
+    stand_drive: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    go_speed: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.0)
