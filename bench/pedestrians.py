@@ -52,7 +52,9 @@ jcrowd's model in the bottleneck, entrance and fd sections, whose agents have a 
 reports the queue's motion in front of the gap (``entrance_queue``, ``bench/follow.py``'s
 ``queue_motion``, beside the same measure of the measured run), ``standing_facing_deg`` (p90
 of a standing body's heading against its desired direction) and ``heading_turn_rate_deg_s``
-(p99). The speed section always compares
+(p99), and runs jcrowd a second time with the opt-in standing rule (``stand_drive`` 0.7,
+:mod:`jcrowd.pedestrians.avoidance`): ``entrance_standing`` (flow, first to last, queue,
+safety). The speed section always compares
 the collision-free speed model with JuPedSim's (the same model on both sides).
 
 Safety over every jcrowd scene: ``min_gap_ratio`` (smallest centre distance ÷ (r_i + r_j)),
@@ -101,6 +103,7 @@ DT = 1.0 / 30.0
 RADIUS = 0.2  # JuPedSim's default radius, used on both sides
 SPEED = 1.34  # free walking speed (Weidmann 1993)
 ENTRANCE_RADIUS = 0.13
+STANDING_DRIVE = 0.7  # the entrance's second jcrowd run: the standing rule on at this c
 ENTRANCE_FPS = 25.0  # the Wuppertal entrance run's frame rate
 SPAWN_GAP = 2.05  # an entering agent waits until nobody is within 2.05 radii of its spot
 
@@ -419,6 +422,18 @@ def entrance(out):
     fps = 1.0 / DT
     out["entrance_queue"] = queue_motion(simulated_paths(p, a), fps)
     out["entrance_queue_measured"] = queue_motion(measured_entrance(), ENTRANCE_FPS)
+    # The opt-in standing rule (jcrowd.pedestrians.avoidance), same scene.
+    calm = AvoidanceParams(stand_drive=STANDING_DRIVE)
+    sp, sa, _ = run_jcrowd(area, exit_, starts, np.zeros(n), 3 * measured_total, **run, params=calm)
+    st = crossings(sp, sa, 1, 0.0)
+    st = st[np.isfinite(st)]
+    out["entrance_standing"] = {
+        "stand_drive": STANDING_DRIVE,
+        "flow_per_s": round(middle_flow(st), 3),
+        "total_s": round(float(st.max() - st.min()), 2) if len(st) > 1 else float("nan"),
+        "queue": queue_motion(simulated_paths(sp, sa), fps),
+        "safety": safety(sp, sa, area, r),
+    }
     if HEADING:
         out.update(heading_measures(p, a, *faces))
     print(f"entrance: {res}", file=sys.stderr, flush=True)
@@ -1002,12 +1017,24 @@ def _text(out):
             "heading p99 ° |",
             "|---|---|---|---|---|",
         ]
-        for name, key in (("jcrowd", "entrance_queue"), ("measured", "entrance_queue_measured")):
-            q = out[key]
+        queues = [("jcrowd", out["entrance_queue"])]
+        if "entrance_standing" in out:
+            calm = out["entrance_standing"]
+            queues.append((f"jcrowd, stand_drive {calm['stand_drive']}", calm["queue"]))
+        queues.append(("measured", out["entrance_queue_measured"]))
+        for name, q in queues:
             lines.append(
                 f"| {name} | {q['moving_share']} | {q['away_over_60_share']} | "
                 f"{q['away_over_90_share']} | {q['smooth_heading_p99_deg']} |"
             )
+        if "entrance_standing" in out:
+            calm = out["entrance_standing"]
+            lines += [
+                "",
+                f"standing rule on (stand_drive {calm['stand_drive']}): {calm['flow_per_s']} /s, "
+                f"{calm['total_s']} s, stuck {calm['safety']['stuck']}, min gap "
+                f"{round(calm['safety']['min_gap_ratio'], 3)}",
+            ]
         if "standing_facing_deg" in out:
             lines += [
                 "",
