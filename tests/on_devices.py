@@ -228,10 +228,11 @@ def pedestrians_task(model: str) -> dict[str, Any]:
         jnp.full(n, 0.2, jnp.float32),
         jnp.ones(n, bool),
         velocity,
-        # The anticipating bodies have a heading that binds their speed (back_share < 1).
+        # The anticipating bodies have a heading that binds their speed (back_share < 1), and
+        # stand where desire and repulsion cancel (the standing rule on).
         heading=jnp.linspace(-3.0, 3.0, n, dtype=jnp.float32) if anticipating else None,
     )
-    params = AvoidanceParams(back_share=0.5) if anticipating else AvoidanceParams()
+    params = AvoidanceParams(back_share=0.5, stand_drive=0.7) if anticipating else AvoidanceParams()
     out: dict[str, Any] = {"devices": len(jax.devices()), "refused": None}
     for side, devices in (("split", jax.devices()), ("one", jax.devices()[:1])):
         step, peds, left = split_pedestrian_step(devices), start, []

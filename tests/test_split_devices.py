@@ -56,8 +56,9 @@ CASES = {
         2,
         exact=("left", "alive"),
         close={"pos": 1e-4, "heading": 1e-3},
-        why="as plain, the neighbours' velocities also through the all-gather, and bodies "
-        "whose heading binds their speed (back_share 0.5): headings to 1e-3 rad",
+        why="as plain, the neighbours' velocities also through the all-gather, bodies whose "
+        "heading binds their speed (back_share 0.5) and the standing rule on: headings to "
+        "1e-3 rad",
     ),
     "crowd-sources": Case(
         "crowd",
