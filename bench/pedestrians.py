@@ -54,7 +54,7 @@ reports the queue's motion in front of the gap (``entrance_queue``, ``bench/foll
 of a standing body's heading against its desired direction) and ``heading_turn_rate_deg_s``
 (p99), and runs jcrowd a second time with the opt-in standing rule (``stand_drive`` 0.7,
 :mod:`jcrowd.pedestrians.avoidance`): ``entrance_standing`` (flow, first to last, queue,
-safety). The speed section always compares
+safety, the two heading measures). The speed section always compares
 the collision-free speed model with JuPedSim's (the same model on both sides).
 
 Safety over every jcrowd scene: ``min_gap_ratio`` (smallest centre distance ÷ (r_i + r_j)),
@@ -424,7 +424,17 @@ def entrance(out):
     out["entrance_queue_measured"] = queue_motion(measured_entrance(), ENTRANCE_FPS)
     # The opt-in standing rule (jcrowd.pedestrians.avoidance), same scene.
     calm = AvoidanceParams(stand_drive=STANDING_DRIVE)
-    sp, sa, _ = run_jcrowd(area, exit_, starts, np.zeros(n), 3 * measured_total, **run, params=calm)
+    calm_faces: list[np.ndarray] = []
+    sp, sa, _ = run_jcrowd(
+        area,
+        exit_,
+        starts,
+        np.zeros(n),
+        3 * measured_total,
+        **run,
+        params=calm,
+        headings=calm_faces,
+    )
     st = crossings(sp, sa, 1, 0.0)
     st = st[np.isfinite(st)]
     out["entrance_standing"] = {
@@ -434,6 +444,8 @@ def entrance(out):
         "queue": queue_motion(simulated_paths(sp, sa), fps),
         "safety": safety(sp, sa, area, r),
     }
+    if HEADING:
+        out["entrance_standing"].update(heading_measures(sp, sa, *calm_faces))
     if HEADING:
         out.update(heading_measures(p, a, *faces))
     print(f"entrance: {res}", file=sys.stderr, flush=True)
@@ -1033,7 +1045,13 @@ def _text(out):
                 "",
                 f"standing rule on (stand_drive {calm['stand_drive']}): {calm['flow_per_s']} /s, "
                 f"{calm['total_s']} s, stuck {calm['safety']['stuck']}, min gap "
-                f"{round(calm['safety']['min_gap_ratio'], 3)}",
+                f"{round(calm['safety']['min_gap_ratio'], 3)}"
+                + (
+                    f"; standing facing p90 {calm['standing_facing_deg']}°, turn rate p99 "
+                    f"{calm['heading_turn_rate_deg_s']}°/s"
+                    if "standing_facing_deg" in calm
+                    else ""
+                ),
             ]
         if "standing_facing_deg" in out:
             lines += [
