@@ -361,6 +361,39 @@ def test_gradients_are_finite_and_match_finite_differences():
         np.testing.assert_allclose(float(g), float(fd), rtol=1e-4)
 
 
+def test_gradients_through_the_standing_rule_match_finite_differences():
+    """Three standing in a line (last velocities 0.1 m/s), the standing rule on: the middle
+    one's share ``‖E‖/c + ‖v'‖/v_go`` is below 1 (premise), and the velocities' derivatives in
+    ``c`` and in the repulsion strength agree with central differences in float64."""
+    pos = np.array([[0.0, -0.5], [0.0, 0.0], [0.0, 0.4 + 0.16466]])
+    n = len(pos)
+    cand = jnp.asarray([[j for j in range(n) if j != i] for i in range(n)], jnp.int32)
+    weights = np.random.default_rng(1).standard_normal((n, 2))
+    with jax.enable_x64(True):
+        own = jnp.tile(jnp.asarray([[0.0, 0.1]]), (n, 1))
+        args = (
+            jnp.asarray(pos),
+            jnp.tile(jnp.asarray([[0.0, 1.0]]), (n, 1)),
+            jnp.full(n, 1.3),
+            jnp.full(n, 0.2),
+            cand,
+            jnp.zeros((0, 2, 2)),
+            jnp.zeros((n, 0), jnp.int32),
+        )
+
+        def total(c, a):
+            p = AvoidanceParams(strength=a, stand_drive=c, go_speed=GO)
+            v, _ = avoid(p, *args, motion=Motion(own, None, jnp.float64(TAU_PLAIN)))
+            return jnp.sum(v * weights)
+
+        c0, a0, h = jnp.float64(DRIVE), jnp.float64(8.0), 1e-6
+        gc, ga = jax.grad(total, argnums=(0, 1))(c0, a0)
+        fd_c = (total(c0 + h, a0) - total(c0 - h, a0)) / (2 * h)
+        fd_a = (total(c0, a0 + h) - total(c0, a0 - h)) / (2 * h)
+        assert abs(float(fd_c)) > 1e-3  # premise: the rule acts on someone
+        np.testing.assert_allclose([float(gc), float(ga)], [float(fd_c), float(fd_a)], rtol=1e-5)
+
+
 def test_a_block_of_the_crowd_against_the_whole_equals_the_whole():
     """One device's interleaved block (agents k, k + 2, …), its candidates looked up by id in
     the whole crowd's grid and its neighbours read from the whole crowd (``others``), gets the
