@@ -37,6 +37,13 @@ everything (``jcrowd run --record all``), and measures from the recording:
   several cm for any swinging foot, so the jump is taken beyond the motion a full-detail
   walker makes in the same frame.
 
+- ``lower_body_deviation_deg`` (p95, p99): the drawn pelvis's forward direction
+  (perpendicular to the hip-to-hip vector, the hips being the feet's grandparent joints, its
+  sign from the rest pose's toes) against the direction travelled over ``TRAVEL_S`` (centred),
+  agent-frames faster than ``FAST_M_S`` over it; ``body_turn_rate_deg_s`` (p99): how fast that
+  forward turns between drawn frames; ``pop_px`` and ``steady_px`` (p99): ``pop_cm`` and
+  ``steady_jump_cm``'s jumps with every joint projected through the scene's camera of that
+  frame into a ``PIXELS`` image.
 - ``queue_motion`` (entrance only), the simulated queue beside the measured one (the Wuppertal
   run ``040_c_56_h-``, ``../shared/data/pedestrians``), the same measure on both: in front of the
   gap (``0.3 < z < 4`` m), the direction of travel over a 0.4 s window (``QUEUE_WINDOW_S``;
@@ -71,6 +78,8 @@ from jcrowd.io import load_dataset
 from jcrowd.model import agent_motion, foot_skate
 from jcrowd.motion.clip import joint_positions
 from jcrowd.motion.gait import find_feet
+from jcrowd.motion.skeleton import rest_positions
+from jcrowd.render.camera import View, project
 from jcrowd.scenario import load_scenario
 
 SCENES = ("entrance", "counterflow")
@@ -169,6 +178,69 @@ def simulated_paths(pos: np.ndarray, alive: np.ndarray) -> list[np.ndarray]:
     return [pos[s[0] : s[1], a] for a, s in enumerate(spans) if s is not None]
 
 
+PIXELS = (1280, 720)  # the image the pops are projected into
+TRAVEL_S = 0.5  # s: the window the lower body is compared with the direction travelled over
+FAST_M_S = 0.3  # m/s: agents slower than this over that window are not compared
+
+
+def hips(skeleton) -> tuple[int, int, float]:
+    """The left and right hip joints (the feet's grandparents) and the sign that turns
+    ``perp(left − right)`` into the body's forward, fixed by the rest pose's toes."""
+    feet = find_feet(skeleton)
+    par = skeleton.parents
+    left, right = par[par[feet.left_ankle]], par[par[feet.right_ankle]]
+    rest, _ = rest_positions(skeleton)
+    fwd = _perp(rest[left] - rest[right])
+    toes = rest[[feet.left_toe, feet.right_toe]] - rest[[feet.left_ankle, feet.right_ankle]]
+    return int(left), int(right), float(np.sign(np.sum(fwd * toes.mean(0)[[0, 2]])) or 1.0)
+
+
+def _perp(hip_to_hip: np.ndarray) -> np.ndarray:
+    """``(x, z)`` perpendicular to the horizontal part of a left-minus-right hip vector."""
+    return np.stack([-hip_to_hip[..., 2], hip_to_hip[..., 0]], axis=-1)
+
+
+def body_measures(pts, pos, alive, skeleton, fps) -> dict:
+    """``lower_body_deviation_deg`` (p95, p99): the drawn pelvis's forward (perpendicular to
+    the hip-to-hip vector) against the direction travelled over ``TRAVEL_S`` (centred), agents
+    faster than ``FAST_M_S`` over it; ``body_turn_rate_deg_s`` (p99): how fast that forward
+    turns between drawn frames."""
+    left, right, sign = hips(skeleton)
+    fwd = sign * _perp(pts[:, :, left] - pts[:, :, right])
+    ang = np.arctan2(fwd[..., 0], fwd[..., 1])
+    half = max(1, round(TRAVEL_S * fps / 2))
+    travel = np.full_like(pos, np.nan)
+    travel[half:-half] = pos[2 * half :] - pos[: -2 * half]
+    ok_t = np.zeros_like(alive)
+    ok_t[half:-half] = alive[2 * half :] & alive[: -2 * half] & alive[half:-half]
+    fast = ok_t & (np.linalg.norm(travel, axis=-1) / (2 * half / fps) > FAST_M_S)
+    fast &= np.isfinite(ang)
+    off = np.remainder(ang - np.arctan2(travel[..., 0], travel[..., 1]) + np.pi, 2 * np.pi)
+    dev = np.degrees(np.abs(off - np.pi))[fast]
+    both = np.isfinite(ang[1:]) & np.isfinite(ang[:-1]) & alive[1:] & alive[:-1]
+    turn = np.abs(np.remainder(ang[1:] - ang[:-1] + np.pi, 2 * np.pi) - np.pi)
+    rate = np.degrees(turn[both]) * fps
+
+    def pct(v, q):
+        return round(float(np.percentile(v, q)), 1) if len(v) else None
+
+    return {
+        "lower_body_deviation_deg": {"p95": pct(dev, 95), "p99": pct(dev, 99)},
+        "body_turn_rate_deg_s": pct(rate, 99),
+    }
+
+
+def pixel_jumps(own, ref, views) -> np.ndarray:
+    """``max_j |Δq_j − Δq⁰_j|`` in pixels per frame step: the drawn joints ``own (F, J, 3)``
+    and the level-0 ones ``ref`` projected with the view of the step's later frame."""
+    out = np.full(len(own) - 1, np.nan)
+    for f, view in enumerate(views[1:]):
+        q, _ = project(np.stack([own[f], own[f + 1], ref[f], ref[f + 1]]), view, *PIXELS)
+        d = (q[1] - q[0]) - (q[3] - q[2])
+        out[f] = np.max(np.linalg.norm(d, axis=-1))
+    return out
+
+
 def measure(model, name: str, steps: int | None) -> dict:
     sim, state = prepare(load_scenario(Path(ROOT) / "examples" / f"{name}.toml"), model)
     steps = steps or round(sim.scenario.duration_s * sim.scenario.fps)
@@ -216,6 +288,18 @@ def measure(model, name: str, steps: int | None) -> dict:
     standing_skate = float(np.mean(np.concatenate(step_feet))) if ok.any() else None
 
     skates, pops, ratios, steady, wraps = [], [], [], [], []
+    pops_px, steady_px = [], []
+    cam = sim.scenario.camera
+    views = [
+        View(
+            tuple(map(float, e)),
+            tuple(map(float, t)),
+            fov_deg=cam.fov_deg,
+            near=cam.near,
+            far=cam.far,
+        )
+        for e, t in zip(rec["eye"], rec["target"], strict=True)
+    ]
     ease = int(np.ceil(BLEND_SECONDS * fps)) + 1  # frames a level change moves the pose over
     for agent in range(n):
         span = alive_span(alive[:, agent])
@@ -228,6 +312,7 @@ def measure(model, name: str, steps: int | None) -> dict:
         lv = level[a:b, agent]
         move = np.diff(own, axis=0)
         extra = np.linalg.norm(move - np.diff(ref, axis=0), axis=-1).max(axis=1)
+        extra_px = np.where(np.isfinite(extra), pixel_jumps(own, ref, views[a:b]), np.nan)
         raw = np.linalg.norm(move, axis=-1).max(axis=1)
         change = (lv[1:] != lv[:-1]) & (lv[1:] < nlev) & (lv[:-1] < nlev)
         normal = np.nanmedian(raw) if np.isfinite(raw).any() else np.nan
@@ -244,7 +329,9 @@ def measure(model, name: str, steps: int | None) -> dict:
             if np.isfinite(window).any():
                 pops.append(100 * np.nanmax(window))
                 ratios.append(np.nanmax(window) / normal)
+                pops_px.append(np.nanmax(np.where(wrap, np.nan, extra_px)[f : min(stop, f + ease)]))
         steady.extend(100 * extra[calm & drawn_both])
+        steady_px.extend(extra_px[calm & drawn_both])
     print(f"{name}: {steps} steps, {n} agents, {len(pops)} level changes", file=sys.stderr)
 
     def pct(v, q):
@@ -278,6 +365,9 @@ def measure(model, name: str, steps: int | None) -> dict:
         "pop_ratio": pct(ratios, 99),
         "steady_jump_cm": pct(steady, 99),
         "wrap_jump_cm": pct(wraps, 99),
+        "pop_px": pct(pops_px, 99),
+        "steady_px": pct(steady_px, 99),
+        **body_measures(pts, pos, alive, model.skeleton, fps),
     }
 
 
@@ -316,6 +406,17 @@ def main() -> None:
             f"{r['wrap_jump_cm']} |"
         )
     text = "\n".join(rows) + f"\n\ncmu16 captures' own skate: {ref:.3f} cm/frame"
+    text += (
+        f"\n\n| scene | lower body vs travel ° p95 / p99 | drawn body turn °/s p99 | "
+        f"pop px p99 | steady px p99 ({PIXELS[0]}×{PIXELS[1]}) |\n|---|---|---|---|---|\n"
+    )
+    for name in args.scenes.split(","):
+        r = out[name]
+        lb = r["lower_body_deviation_deg"]
+        text += (
+            f"| {name} | {lb['p95']} / {lb['p99']} | {r['body_turn_rate_deg_s']} | "
+            f"{r['pop_px']} | {r['steady_px']} |\n"
+        )
     if "entrance" in out:
         q = out["entrance"]["queue_motion"]
         text += (
