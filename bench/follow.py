@@ -232,12 +232,16 @@ def body_measures(pts, pos, alive, skeleton, fps) -> dict:
 
 def pixel_jumps(own, ref, views) -> np.ndarray:
     """``max_j |Δq_j − Δq⁰_j|`` in pixels per frame step: the drawn joints ``own (F, J, 3)``
-    and the level-0 ones ``ref`` projected with the view of the step's later frame."""
+    and the level-0 ones ``ref`` projected with the view of the step's later frame (one
+    projection per distinct view: a fixed camera projects every frame at once)."""
+    pairs = np.stack([own[:-1], own[1:], ref[:-1], ref[1:]], axis=1)  # (F−1, 4, J, 3)
     out = np.full(len(own) - 1, np.nan)
-    for f, view in enumerate(views[1:]):
-        q, _ = project(np.stack([own[f], own[f + 1], ref[f], ref[f + 1]]), view, *PIXELS)
-        d = (q[1] - q[0]) - (q[3] - q[2])
-        out[f] = np.max(np.linalg.norm(d, axis=-1))
+    later = views[1:]
+    for view in dict.fromkeys(later):
+        sel = np.array([v == view for v in later])
+        q, _ = project(pairs[sel], view, *PIXELS)
+        d = (q[:, 1] - q[:, 0]) - (q[:, 3] - q[:, 2])
+        out[sel] = np.max(np.linalg.norm(d, axis=-1), axis=-1)
     return out
 
 

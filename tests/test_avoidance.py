@@ -200,13 +200,14 @@ def test_closed_forms():
         np.testing.assert_allclose(np.asarray(v)[0], [0.0, want], atol=1e-4)
 
 
-def _standing(pos, params=None):
-    """Velocities of people standing (last velocity 0) at ``pos``, all wanting +z at 1.3 m/s
-    (r = 0.2 m), by the plain model with its reaction time at Δt = τ_p (so the velocity is
-    the model's own, not relaxed), every other one a candidate, no walls."""
+def _standing(pos, params=None, own=None):
+    """Velocities of people at ``pos``, all wanting +z at 1.3 m/s (r = 0.2 m), by the plain
+    model with its reaction time at Δt = τ_p (so the velocity is the model's own, not
+    relaxed), every other one a candidate, no walls; last velocities ``own`` (default 0:
+    standing)."""
     n = len(pos)
     cand = jnp.asarray([[j for j in range(n) if j != i] for i in range(n)], jnp.int32)
-    motion = Motion(jnp.zeros((n, 2), jnp.float32), None, jnp.float32(TAU_PLAIN))
+    last = jnp.zeros((n, 2), jnp.float32) if own is None else jnp.asarray(own, jnp.float32)
     v, _ = avoid(
         STANDING if params is None else params,
         jnp.asarray(pos, jnp.float32),
@@ -216,7 +217,7 @@ def _standing(pos, params=None):
         cand,
         jnp.zeros((0, 2, 2), jnp.float32),
         jnp.zeros((n, 0), jnp.int32),
-        motion=motion,
+        motion=Motion(last, None, jnp.float32(TAU_PLAIN)),
     )
     return np.asarray(v)
 
@@ -239,21 +240,8 @@ def test_a_walking_person_follows_as_the_paper_says():
     """The rule's share ``min(1, ‖E‖/c + ‖v'‖/v_go)``: walking at v_go = 2 m/s the share is 1,
     and the person 0.25 m behind another walks at the paper's V(0.25) = 0.4156 m/s (standing,
     0.2038: the test above)."""
-    n, g = 2, 0.25
-    cand = jnp.asarray([[1], [0]], jnp.int32)
-    own = jnp.asarray([[0.0, 2.0], [0.0, 0.0]], jnp.float32)
-    v, _ = avoid(
-        STANDING,
-        jnp.asarray([[0.0, 0.0], [0.0, 0.4 + g]], jnp.float32),
-        jnp.tile(jnp.asarray([0.0, 1.0], jnp.float32), (n, 1)),
-        jnp.full(n, 1.3, jnp.float32),
-        jnp.full(n, 0.2, jnp.float32),
-        cand,
-        jnp.zeros((0, 2, 2), jnp.float32),
-        jnp.zeros((n, 0), jnp.int32),
-        motion=Motion(own, None, jnp.float32(TAU_PLAIN)),
-    )
-    np.testing.assert_allclose(np.asarray(v)[0], [0.0, 0.4156], atol=2e-4)
+    v = _standing([[0.0, 0.0], [0.0, 0.65]], own=[[0.0, 2.0], [0.0, 0.0]])
+    np.testing.assert_allclose(v[0], [0.0, 0.4156], atol=2e-4)
 
 
 def test_the_middle_of_three_stands_where_front_and_back_balance():
