@@ -30,6 +30,12 @@ os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.5")
 # A size limit makes jax lock the cache's files (filelock), so that no process reads an entry
 # another is still writing; 4 GB is far above one run's ~100 MB.
 os.environ.setdefault("JAX_COMPILATION_CACHE_MAX_SIZE", str(4 << 30))
+# XLA's cheaper compile (backend optimisation level 0, no expensive LLVM passes): a test runs
+# most of its programs once or a few times, so compiling takes longer than running; the results
+# the tests check are the same within their tolerances (the whole suite passes either way).
+# The benches and the CLI outside the tests compile with XLA's defaults;
+# JAX_DISABLE_MOST_OPTIMIZATIONS=0 runs the tests that way too.
+os.environ.setdefault("JAX_DISABLE_MOST_OPTIMIZATIONS", "1")
 
 import jax  # noqa: E402  (after the cache settings, which jax reads on import)
 import pytest  # noqa: E402
