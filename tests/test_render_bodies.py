@@ -142,3 +142,88 @@ def test_body_level_errors(ctx, level) -> None:  # type: ignore[no-untyped-def]
         _render(
             ctx, level, LevelInstances(inst.joints, inst.valid, inst.colors[:, :2], inst.heights)
         )
+
+
+def _default_coarsest_level():  # type: ignore[no-untyped-def]
+    """The shipped body skinned to the default model's coarsest level (a kept-joint subset)."""
+    from jcrowd import load_default_model
+    from jcrowd.crowd.bodies import skinned_levels
+    from jcrowd.io.body_file import load_body
+    from jcrowd.io.resources import body_path
+    from jcrowd.motion.body import bind_body
+
+    model = load_default_model()
+    bound = bind_body(load_body(body_path()), model.skeleton)
+    return skinned_levels(model, bound)[-1]
+
+
+@pytest.mark.parametrize("which", ["walker, every joint kept", "default model, coarsest level"])
+def test_the_vertex_shader_skins_every_vertex_as_skin_does(ctx, level, which: str) -> None:  # type: ignore[no-untyped-def]
+    """The body shader's world positions, read back by transform feedback of ``gl_Position``
+    with an identity view-projection, equal :func:`jcrowd.motion.skinning.skin` (NumPy, float64)
+    on the same agents' joint frames, for every vertex of every mesh, three agents of three
+    heights, to 1e-5 m. A wrong texel, row, weight, offset layout or height in the shader or in
+    what :class:`BodyLevel` stages moves vertices by centimetres or more; golden images would
+    only show it once regenerated from the broken code."""
+    import moderngl
+
+    from jcrowd.motion.rotation import quat_from_matrix
+    from jcrowd.motion.skinning import frames_from_points, skin
+    from jcrowd.render.bodies import BODY_VERTEX, BodyLevel
+    from jcrowd.render.meshes import CAPSULE_FRAGMENT
+
+    if which.startswith("default"):
+        level = _default_coarsest_level()
+    rng = np.random.default_rng(5)
+    width = int(max(level.kept.max(), level.ref_points.max())) + 1
+    if which.startswith("walker"):
+        pts = walk_points()
+        poses = [
+            place(pts[3], -1.0, 1.0, 0.4),
+            place(pts[18], 1.2, 0.5, 2.0),
+            place(pts[27], 0.3, -1.5, -2.5),
+        ]
+        points = np.stack(poses).astype(np.float32)
+    else:  # any points: the frames found from them are what both sides skin with
+        points = rng.normal(scale=0.3, size=(3, width, 3)).astype(np.float32)
+        points[:, :, 0] += np.float32([[-1.0], [1.2], [0.3]])
+        points[:, :, 1] += 1.0
+    heights = np.float32([1.55, 1.7, 1.9])
+    colors = np.tile(np.float32([0.8, 0.2, 0.2]), (3, 1))
+    prog = ctx.program(
+        vertex_shader=BODY_VERTEX, fragment_shader=CAPSULE_FRAGMENT, varyings=["gl_Position"]
+    )
+    previous = ctx.fbo  # bound again before release: a deleted bound framebuffer is an error
+    fbo = ctx.simple_framebuffer((4, 4))  # a draw needs a complete framebuffer, even this one
+    body = BodyLevel(ctx, prog, level, 3)
+    try:
+        fbo.use()
+        assert body.stage(points, np.ones(3, bool), colors, heights, np.eye(4), 100, "test") == 3
+        # The staged rows are sorted by mesh; each row's agent, by its root's x.
+        agent = np.argmin(np.abs(body.roots[:, :1] - points[None, :, 0, 0]), axis=1)
+        assert sorted(agent) == [0, 1, 2]
+        rot, pos = frames_from_points(level, points[agent].astype(np.float64), heights[agent])
+        prog["u_view_proj"].write(np.eye(4, dtype="f4").tobytes())
+        prog["u_colors_at"].value = 3 * body.num_kept
+        prog["u_row0"].value = 0
+        body.texture.use(location=0)
+        for mesh, vao in zip(level.meshes, body.vaos, strict=True):
+            want = skin(
+                mesh.bones,
+                mesh.weights,
+                mesh.offsets,
+                quat_from_matrix(rot),
+                pos,
+                heights[agent].astype(np.float64),
+            )[:, mesh.triangles.ravel()]
+            out = ctx.buffer(reserve=want.size // 3 * 16)
+            vao.transform(out, mode=moderngl.POINTS, instances=3)
+            got = np.frombuffer(out.read(), np.float32).reshape(3, -1, 4)
+            out.release()
+            np.testing.assert_allclose(got[..., 3], 1.0)
+            np.testing.assert_allclose(got[..., :3], want, atol=1e-5)
+    finally:
+        previous.use()
+        body.release()
+        fbo.release()
+        prog.release()
