@@ -224,6 +224,7 @@ def build_tensor_model(
     controls_h = np.array([smp.height for smp in samples])
     # Mirrored pairs are kept or frozen together at every level.
     counts = pair_safe_counts(skel, order, joint_counts(skel.num_joints, config.key_levels))
+    truth = _root_frames(np.transpose(tensor, (2, 1, 0)) * layout.scale, layout, skel, controls_h)
     levels = []
     for level, count in zip(kl.levels, counts, strict=True):
         kept = _kept(order, skel.num_joints, count)
@@ -233,7 +234,7 @@ def build_tensor_model(
             continue
         refitted = refit_level(raw, layout, skel, kept, level.tucker)
         # Keep whichever reproduces the samples' whole bodies better (module docstring, 6).
-        errors = [_body_error(tensor, lv, layout, skel, controls_h) for lv in (frozen, refitted)]
+        errors = [_body_error(truth, lv, layout, skel, controls_h) for lv in (frozen, refitted)]
         levels.append(refitted if errors[1] < errors[0] else frozen)
     controls = np.stack([smp.controls() for smp in samples])
     groups = np.array([smp.group for smp in samples], np.int32)
@@ -295,23 +296,30 @@ def refit_level(
     return TensorLevel(tucker, kept, mean_squared_error(tensor, reconstruct(tucker)))
 
 
+def _root_frames(
+    y: np.ndarray, layout: PoseLayout, skeleton: Skeleton, heights: np.ndarray
+) -> list[np.ndarray]:
+    """Each sample's joint positions in its root frame (:func:`_root_frame`) from unscaled pose
+    vectors ``(S, T, P)``."""
+    return [_root_frame(y[s], layout, skeleton, float(heights[s]))[0] for s in range(len(y))]
+
+
 def _body_error(
-    tensor: np.ndarray,
+    truth: list[np.ndarray],
     level: TensorLevel,
     layout: PoseLayout,
     skeleton: Skeleton,
     heights: np.ndarray,
 ) -> float:
-    """Mean whole-body joint error in the root frame of a level's reconstruction (m)."""
-    truth = np.transpose(tensor, (2, 1, 0)) * layout.scale
+    """Mean whole-body joint error in the root frame of a level's reconstruction (m), against
+    the samples' own root-frame joints ``truth`` (:func:`_root_frames` of the tensor)."""
     approx = np.transpose(reconstruct(level.tucker), (2, 1, 0)) * layout.scale
     dropped = [j for j in range(1, skeleton.num_joints) if j not in level.joints]
     approx[:, :, layout.joint_elements(dropped)] = 0.0
-    err = []
-    for s in range(truth.shape[0]):
-        a = _root_frame(truth[s], layout, skeleton, float(heights[s]))[0]
-        b = _root_frame(approx[s], layout, skeleton, float(heights[s]))[0]
-        err.append(np.linalg.norm(a - b, axis=-1).mean())
+    err = [
+        np.linalg.norm(a - b, axis=-1).mean()
+        for a, b in zip(truth, _root_frames(approx, layout, skeleton, heights), strict=True)
+    ]
     return float(np.mean(err))
 
 
