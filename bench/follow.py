@@ -270,16 +270,17 @@ def standing_facing(ang, pos, alive, fps) -> np.ndarray:
     return np.concatenate(out) if out else np.zeros(0)
 
 
-def pixel_jumps(own, ref, views) -> np.ndarray:
+def pixel_jumps(own, ref, view_ids, views) -> np.ndarray:
     """``max_j |Δq_j − Δq⁰_j|`` in pixels per frame step: the drawn joints ``own (F, J, 3)``
-    and the level-0 ones ``ref`` projected with the view of the step's later frame (one
-    projection per distinct view: a fixed camera projects every frame at once)."""
+    and the level-0 ones ``ref`` projected with the view of the step's later frame
+    (``views[view_ids[f]]``; one projection per distinct view: a fixed camera projects every
+    frame at once)."""
     pairs = np.stack([own[:-1], own[1:], ref[:-1], ref[1:]], axis=1)  # (F−1, 4, J, 3)
     out = np.full(len(own) - 1, np.nan)
-    later = views[1:]
-    for view in dict.fromkeys(later):
-        sel = np.array([v == view for v in later])
-        q, _ = project(pairs[sel], view, *PIXELS)
+    later = view_ids[1:]
+    for k in np.unique(later):
+        sel = later == k
+        q, _ = project(pairs[sel], views[k], *PIXELS)
         d = (q[:, 1] - q[:, 0]) - (q[:, 3] - q[:, 2])
         out[sel] = np.max(np.linalg.norm(d, axis=-1), axis=-1)
     return out
@@ -335,16 +336,20 @@ def measure(model, name: str, steps: int | None) -> dict:
     skates, pops, ratios, steady, wraps = [], [], [], [], []
     pops_px, steady_px = [], []
     cam = sim.scenario.camera
+    eyes, view_ids = np.unique(
+        np.concatenate([rec["eye"], rec["target"]], axis=1), axis=0, return_inverse=True
+    )
     views = [
         View(
-            tuple(map(float, e)),
-            tuple(map(float, t)),
+            tuple(map(float, e[:3])),
+            tuple(map(float, e[3:])),
             fov_deg=cam.fov_deg,
             near=cam.near,
             far=cam.far,
         )
-        for e, t in zip(rec["eye"], rec["target"], strict=True)
+        for e in eyes
     ]
+    view_ids = view_ids.reshape(-1)
     ease = int(np.ceil(BLEND_SECONDS * fps)) + 1  # frames a level change moves the pose over
     for agent in range(n):
         span = alive_span(alive[:, agent])
@@ -357,7 +362,7 @@ def measure(model, name: str, steps: int | None) -> dict:
         lv = level[a:b, agent]
         move = np.diff(own, axis=0)
         extra = np.linalg.norm(move - np.diff(ref, axis=0), axis=-1).max(axis=1)
-        extra_px = np.where(np.isfinite(extra), pixel_jumps(own, ref, views[a:b]), np.nan)
+        extra_px = np.where(np.isfinite(extra), pixel_jumps(own, ref, view_ids[a:b], views), np.nan)
         raw = np.linalg.norm(move, axis=-1).max(axis=1)
         change = (lv[1:] != lv[:-1]) & (lv[1:] < nlev) & (lv[:-1] < nlev)
         normal = np.nanmedian(raw) if np.isfinite(raw).any() else np.nan

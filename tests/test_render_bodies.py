@@ -172,10 +172,6 @@ def test_the_vertex_shader_skins_every_vertex_as_skin_does(ctx, level, which: st
     from jcrowd.render.bodies import BODY_VERTEX, BodyLevel
     from jcrowd.render.meshes import CAPSULE_FRAGMENT
 
-    if which.startswith("default"):
-        level = _default_coarsest_level()
-    rng = np.random.default_rng(5)
-    width = int(max(level.kept.max(), level.ref_points.max())) + 1
     if which.startswith("walker"):
         pts = walk_points()
         poses = [
@@ -185,7 +181,9 @@ def test_the_vertex_shader_skins_every_vertex_as_skin_does(ctx, level, which: st
         ]
         points = np.stack(poses).astype(np.float32)
     else:  # any points: the frames found from them are what both sides skin with
-        points = rng.normal(scale=0.3, size=(3, width, 3)).astype(np.float32)
+        level = _default_coarsest_level()
+        width = int(max(level.kept.max(), level.ref_points.max())) + 1
+        points = np.random.default_rng(5).normal(scale=0.3, size=(3, width, 3)).astype(np.float32)
         points[:, :, 0] += np.float32([[-1.0], [1.2], [0.3]])
         points[:, :, 1] += 1.0
     heights = np.float32([1.55, 1.7, 1.9])
