@@ -113,6 +113,8 @@ def cmu16_tensor(cmu16_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> A
     others wait for that file and load it. If the builder fails, the waiters fail too, naming
     the builder's error file.
     """
+    from helpers import fully_optimised
+
     from jcrowd.io import load_dataset, load_tensor_model, save_tensor_model
     from jcrowd.model import build_tensor_model
 
@@ -132,12 +134,22 @@ def cmu16_tensor(cmu16_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> A
             time.sleep(0.5)
         return load_tensor_model(path)
     try:
-        model = build_tensor_model(load_dataset(cmu16_dir))
+        with fully_optimised():
+            model = build_tensor_model(load_dataset(cmu16_dir))
         save_tensor_model(path, model)
     except BaseException as exc:
         failed.write_text(repr(exc))
         raise
     return model
+
+
+@pytest.fixture(scope="session")
+def step_model() -> Any:
+    """The shipped model with three of its levels, for the crowd step's tests
+    (``helpers.step_model``)."""
+    from helpers import step_model
+
+    return step_model()
 
 
 @pytest.fixture(scope="module")

@@ -150,12 +150,14 @@ def _refused(fn: Any, sim: Any, state: Any) -> str | None:
 
 
 def _prepared(caps: Sequence[int] = ()) -> tuple[Any, Any]:
-    """The scenario on stdin prepared with the shipped model (``caps``: LOD capacities)."""
-    from jcrowd import load_default_model
+    """The scenario on stdin prepared with the step's test model (``helpers.step_model``: three
+    of the shipped model's levels; ``caps``: LOD capacities, one per level)."""
+    from helpers import step_model
+
     from jcrowd.crowd import prepare
     from jcrowd.scenario import parse_scenario
 
-    sim, state = prepare(parse_scenario(sys.stdin.read(), "t.toml"), load_default_model())
+    sim, state = prepare(parse_scenario(sys.stdin.read(), "t.toml"), step_model())
     if caps:
         sim = dataclasses.replace(sim, config=dataclasses.replace(sim.config, capacities=caps))
     return sim, state

@@ -1,6 +1,7 @@
 """The crowd step: buckets, jit, traces, clip hand-over continuity, paths, and two processes on
-one mesh. The step split over devices in one process is compared with one device in
-tests/test_split_devices.py (this module's ``SCENE``)."""
+one mesh, with three of the shipped model's levels (conftest's ``step_model``). The step split
+over devices in one process is compared with one device in tests/test_split_devices.py (this
+module's ``SCENE``)."""
 
 from __future__ import annotations
 
@@ -14,8 +15,8 @@ import numpy as np
 import pytest
 from on_devices import finish, start_python
 
-from jcrowd import load_default_model
 from jcrowd.crowd import decode_coeffs, level_points, pose_from_coeffs, prepare, step
+from jcrowd.io import save_motion_model
 from jcrowd.scenario import parse_scenario
 
 SCENE = """
@@ -40,8 +41,8 @@ path = {{ waypoints = [[0, 60], [60, 60]], loop = false }}
 
 
 @pytest.fixture(scope="module")
-def model():
-    return load_default_model()
+def model(step_model):
+    return step_model
 
 
 @pytest.fixture(scope="module")
@@ -88,15 +89,16 @@ def test_padded_buckets_equal_unpadded(prepared):
     """Capacities with room to spare (padding slots) give the same crowd as tight ones."""
     sim, state = _sim(prepared)
     tight_state, tight = _run(sim, state, 8)
-    hist = np.bincount(np.asarray(tight[0].level), minlength=7)
-    roomy = tuple(int(c) + 5 for c in hist[:6])  # ≥ each level's count: no overflow either way
+    nlev = len(sim.config.capacities)
+    hist = np.bincount(np.asarray(tight[0].level), minlength=nlev + 1)
+    roomy = tuple(int(c) + 5 for c in hist[:nlev])  # ≥ each level's count: no overflow either way
     sim2 = replace(sim, config=replace(sim.config, capacities=roomy))
     roomy_state, roomy_frames = _run(sim2, state, 8)
     for a, b in zip(jax.tree.leaves(tight_state), jax.tree.leaves(roomy_state), strict=True):
         # Same per-agent arithmetic in a differently sized vmap: XLA may vectorise the tails
         # differently, a few float32 ulps of values up to ~60 m (ulp 3.8–7.6 µm): 3e-5.
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=3e-5)
-    for lv in range(6):
+    for lv in range(nlev):
         f1, f2 = tight[-1], roomy_frames[-1]
         ids1 = np.asarray(f1.slots[lv])[np.asarray(f1.valid[lv])]
         ids2 = np.asarray(f2.slots[lv])[np.asarray(f2.valid[lv])]
@@ -132,7 +134,7 @@ def test_chunked_step_equals_one_chunk(prepared):
     for a, b in zip(jax.tree.leaves(whole_state), jax.tree.leaves(part_state), strict=True):
         # Same arithmetic in differently sized vmaps (a few float32 ulps, as above).
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=3e-5)
-    for lv in range(6):
+    for lv in range(len(sim.config.capacities)):
         ok = np.asarray(whole[-1].valid[lv])
         np.testing.assert_array_equal(ok, np.asarray(part[-1].valid[lv]))
         np.testing.assert_allclose(
@@ -189,7 +191,7 @@ def test_traced_once_with_changing_level_histogram(prepared):
 def test_clip_handover_is_continuous(prepared):
     """Per-frame joint displacement of blended (level-0) agents at clip hand-overs stays within
     the 99th percentile of their within-clip displacements."""
-    sim, state = _sim(prepared, count=6, capacities=(6, 6, 6, 6, 6, 6), thresholds=(1e3,) * 5)
+    sim, state = _sim(prepared, count=6, capacities=(6,) * 3, thresholds=(1e3,) * 2)
     fn = sim.compiled()
     prev_pts, prev_tau = None, None
     inside, boundary = [], []
@@ -242,14 +244,16 @@ def _free_port() -> int:
 
 
 @pytest.mark.slow
-def test_two_processes_on_loopback_equal_one_process(tmp_path):
+def test_two_processes_on_loopback_equal_one_process(model, tmp_path):
     """`jcrowd run` as two processes (2 CPU devices each, one 4-device mesh over gloo) records
     the same crowd as one process on one device (the oracle: positions and headings to 1e-5);
     each prints exactly one JSON object, and the one-process run compiles its step once. The
     one-device side stays a process of its own: the command is the thing compared."""
     scene = tmp_path / "s.toml"
     scene.write_text(SCENE.format(count=32))
-    base = ["-m", "jcrowd.cli", "run", str(scene), "--steps", "5", "--json"]
+    save_motion_model(tmp_path / "m.jcm", model)
+    base = ["-m", "jcrowd.cli", "run", str(scene), "--model", str(tmp_path / "m.jcm")]
+    base += ["--steps", "5", "--json"]
     single = finish(start_python([*base, "--out", str(tmp_path / "one.npz")], 1))
     assert json.loads(single)["recompiles"] == 0
     port = _free_port()
@@ -299,17 +303,17 @@ def test_detail_culling_turns_tiny_agents_into_walking_dots(prepared):
 
 @pytest.mark.slow
 def test_agents_beyond_the_budget_become_dots_and_count_as_overflow(prepared):
-    """One slot per level: six agents are placed, the others in view (counted with room for
+    """One slot per level: three agents are placed, the others in view (counted with room for
     all 24, the oracle) are dots, and the overflow counts at least them."""
-    sim, state = _sim(prepared, count=24, capacities=(1, 1, 1, 1, 1, 1), min_pixels=0.0)
+    sim, state = _sim(prepared, count=24, capacities=(1,) * 3, min_pixels=0.0)
     view = sim.view_at(0.0)
     _, frame = sim.compiled(donate=False)(state, view, sim.dt)
     placed = sum(int(np.asarray(v).sum()) for v in frame.valid)
     dots = int(np.asarray(frame.dots).sum())
-    roomy = replace(sim, config=replace(sim.config, capacities=(24,) * 6))
+    roomy = replace(sim, config=replace(sim.config, capacities=(24,) * 3))
     _, all_in = roomy.compiled(donate=False)(state, view, sim.dt)
     visible = sum(int(np.asarray(v).sum()) for v in all_in.valid)
-    assert placed == 6 and visible > 6  # one per level; the rest of those in view are dots
+    assert placed == 3 and visible > 3  # one per level; the rest of those in view are dots
     assert dots == visible - placed and int(frame.overflow) >= dots
 
 
@@ -394,7 +398,7 @@ def test_step_compiles_without_state_copies_and_same_results(prepared):
 def test_coarsest_level_cached_cores_match_direct_decode_across_clip_changes(prepared):
     """Every agent at the coarsest level for 50 steps (past its clip hand-over): each frame's
     points equal the decode of the agent's current clip computed from scratch."""
-    sim, state = _sim(prepared, thresholds=(0.1, 0.2, 0.3, 0.4, 0.5), refresh=24)
+    sim, state = _sim(prepared, thresholds=(0.1, 0.2), refresh=24)
     lv = sim.crowd.decoders.levels[-1]
     fn = sim.compiled(donate=False)
 

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import fully_optimised
 
 from jcrowd.errors import StoreError
 from jcrowd.io import load_dataset, load_motion_model, save_motion_model, save_tensor_model
@@ -16,8 +17,9 @@ def test_round_trip(cmu16_dir: Path, tmp_path: Path) -> None:
     # A small fit (3 key levels, no per-level refit) keeps this test quick; the format does not
     # depend on size or on how the levels were fitted.
     config = TensorModelConfig(key_levels=3, level_fit="freeze")
-    tensor = build_tensor_model(load_dataset(cmu16_dir), config)
-    model = fit_motion_model(tensor)
+    with fully_optimised():
+        tensor = build_tensor_model(load_dataset(cmu16_dir), config)
+        model = fit_motion_model(tensor)
     path = tmp_path / "m.jcm"
     save_motion_model(path, model, extra={"note": "test"})
     back, extra = load_motion_model(path)

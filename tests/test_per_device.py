@@ -70,7 +70,7 @@ def test_split_equals_blocks_when_the_budget_binds() -> None:
     each device's block stepped alone with its share of the budget: same levels, dots,
     counters and drawn agents, positions, phases and points to 1e-5; every placed agent is
     drawn once."""
-    caps = [2, 2, 2, 2, 4, 48]  # far fewer near slots than the 48 agents 0–40 m away want
+    caps = [2, 2, 48]  # far fewer near slots than the 48 agents 0–40 m away want
     out = _run("blocks", caps)
     split, blocks = out["split"], out["reference"]
     assert out["devices"] == 2 and out["shards"] == 2
@@ -125,7 +125,7 @@ def test_grouped_near_agents_fill_the_near_levels_as_on_one_device() -> None:
     agents: 100 level-0 slots, 200 near agents — one device places 100 at level 0, two devices
     (64 slots each: a share is at least one 64-slot chunk) place 128, all near agents. In
     contiguous blocks all 200 near agents would sit on device 0, which would place 64."""
-    caps = [100, 100, 100, 100, 200, 400]
+    caps = [100, 100, 400]
     out = _run("whole", caps, GROUPED)
     split, whole = out["split"], out["reference"]
     assert out["devices"] == 2 and out["shards"] == 2

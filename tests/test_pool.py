@@ -14,10 +14,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import step_model
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jcrowd import load_default_model
 from jcrowd.crowd import prepare
 from jcrowd.crowd.pool import plan_pool, spawn_due
 from jcrowd.errors import ScenarioError
@@ -143,7 +143,7 @@ def _spawn_loop(state, reservoir, times, first_id, budget):
 def test_spawn_due_equals_a_slot_by_slot_loop(budget):
     """With the budget binding (2) and not (50)."""
     sim, state = prepare(
-        parse_scenario(SCENE.format(duration=8, avoid="false", count=4), "t"), load_default_model()
+        parse_scenario(SCENE.format(duration=8, avoid="false", count=4), "t"), step_model()
     )
     pool = sim.pool
     rng = np.random.default_rng(0)
@@ -171,7 +171,7 @@ def test_spawn_due_equals_a_slot_by_slot_loop(budget):
 def test_every_source_agent_appears_once_on_time_where_its_source_is():
     avoid = "true"  # (without avoidance the pool is the same; spawn_due's test covers it)
     sim, state = prepare(
-        parse_scenario(SCENE.format(duration=12, avoid=avoid, count=4), "t"), load_default_model()
+        parse_scenario(SCENE.format(duration=12, avoid=avoid, count=4), "t"), step_model()
     )
     fn = sim.compiled(donate=False)
     n0, times = 4, np.asarray(sim.pool.times)

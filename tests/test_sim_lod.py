@@ -145,10 +145,11 @@ far_every = {every}
 def test_far_agents_in_turn_keep_apart_without_recompiling():
     """The crossing plaza with far agents every 4 steps: no recompiles after the first step,
     and nobody closer than 0.9 × the two radii (the safety bar of issue 18)."""
-    from jcrowd import load_default_model
+    from helpers import step_model
+
     from jcrowd.crowd import prepare
 
-    sim, state = prepare(parse_scenario(PLAZA.format(every=4), "plaza.toml"), load_default_model())
+    sim, state = prepare(parse_scenario(PLAZA.format(every=4), "plaza.toml"), step_model())
     assert sim.config.far_every == 4
     fn = sim.compiled()
     view, dt = sim.view_at(0.0), sim.dt_array

@@ -12,8 +12,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import step_model
 
-from jcrowd import load_default_model
 from jcrowd.crowd import aim_point, prepare
 from jcrowd.scenario import parse_scenario
 
@@ -60,7 +60,7 @@ def test_aim_point_extrapolates_the_velocity():
 
 def _run(avoid: bool, steps: int = 150, model: str = "collision-free-speed"):
     text = COUNTERFLOW.format(avoid="true" if avoid else "false", model=model)
-    sim, state = prepare(parse_scenario(text, "t.toml"), load_default_model())
+    sim, state = prepare(parse_scenario(text, "t.toml"), step_model())
     fn = sim.compiled(donate=False)
     closest, follow = np.inf, 0.0
     for i in range(steps):
@@ -130,7 +130,7 @@ def test_a_crowded_waypoint_counts_as_passed_only_past_it_and_within_pass_reach(
     from jcrowd.crowd.schedule import PASS_REACH, schedule
 
     text = PATH_SCENE.format(avoid="true" if avoid else "false")
-    sim, state = prepare(parse_scenario(text, "t.toml"), load_default_model())
+    sim, state = prepare(parse_scenario(text, "t.toml"), step_model())
     reach = sim.config.reach
     inside, between, beyond = 0.5 * reach, 0.5 * (1 + PASS_REACH) * reach, 1.2 * PASS_REACH * reach
     # (x, z) of each agent around the waypoint (0, 0); the next leg runs north (+z).
@@ -161,7 +161,7 @@ def test_agents_are_numbered_in_grid_cell_order_within_each_group():
     from jcrowd.scenario import spawn
 
     scenario = parse_scenario(COUNTERFLOW.format(avoid="true", model="collision-free-speed"), "c")
-    sim, state = prepare(scenario, load_default_model())
+    sim, state = prepare(scenario, step_model())
     raw, got = spawn(scenario), sim.spawn
     grid = sim.config.grid
     assert grid is not None
