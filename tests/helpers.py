@@ -77,8 +77,8 @@ def fully_optimised() -> Iterator[None]:
     """Compile what runs inside with XLA's full optimisation (conftest lowers it for the tests).
 
     For the fits: a few programs run over every frame of every capture (the per-level refit's
-    Levenberg–Marquardt), so compiling them well pays; a cmu16 tensor fit measured ~45 s this
-    way against ~60 s with the tests' cheaper compile, on 2 cores.
+    Levenberg–Marquardt), so their run time, not their compile time, decides how long a fit
+    takes. The in-memory jit caches keep whatever was compiled, inside or outside.
     """
     before = jax.config.read("jax_disable_most_optimizations")
     jax.config.update("jax_disable_most_optimizations", False)
