@@ -103,15 +103,6 @@ def hermes_dir() -> Path:
     return _need("pedestrians/hermes_uo")
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Under pytest-xdist (``--dist loadgroup``, pyproject's ``addopts``) the tests that read the
-    shared cmu16 fit run on one worker: the others go on with their own tests instead of waiting
-    for that fit (~1 min) in the fixture."""
-    for item in items:
-        if "cmu16_tensor" in getattr(item, "fixturenames", ()):
-            item.add_marker(pytest.mark.xdist_group("cmu16_tensor"))
-
-
 @pytest.fixture(scope="session")
 def cmu16_tensor(cmu16_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Any:
     """The default tensor fit of ``cmu16`` (about 35 s: the per-level refit), built once per
