@@ -224,7 +224,11 @@ def build_tensor_model(
     controls_h = np.array([smp.height for smp in samples])
     # Mirrored pairs are kept or frozen together at every level.
     counts = pair_safe_counts(skel, order, joint_counts(skel.num_joints, config.key_levels))
-    truth = _root_frames(np.transpose(tensor, (2, 1, 0)) * layout.scale, layout, skel, controls_h)
+    truth = (  # the samples' own root-frame joints, which the refitted levels are judged by
+        _root_frames(np.transpose(tensor, (2, 1, 0)) * layout.scale, layout, skel, controls_h)
+        if config.level_fit != "freeze"
+        else []
+    )
     levels = []
     for level, count in zip(kl.levels, counts, strict=True):
         kept = _kept(order, skel.num_joints, count)
