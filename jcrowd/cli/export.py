@@ -138,7 +138,8 @@ def _glb(args: argparse.Namespace, rec: dict, model: Any) -> dict[str, Any]:
         task = bar.add_task(f"re-synthesizing {len(ids)} agents", total=len(ids))
         for a in ids:
             motion = slice_frames(agent_motion(model, rec, a), span.start, span.stop)
-            agents.append(CrowdAgent(motion, float(rec["height"][a]), alive_all[span, a], tints[a]))
+            scale = float(rec["height"][a]) / model.body_height  # stature → skeleton scale
+            agents.append(CrowdAgent(motion, scale, alive_all[span, a], tints[a]))
             bar.advance(task)
     pos = np.asarray(rec["position"])[span][alive_all[span]]
     mid = pos.mean(axis=0) if len(pos) else np.zeros(2)

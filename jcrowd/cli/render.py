@@ -242,7 +242,7 @@ def render_scenario(
     n_frames = sim.steps if frames is None else frames
     group_colors = np.asarray(sim.spawn.color, np.float32)
     n = sim.num_agents
-    heights = np.asarray(sim.spawn.height, np.float32)
+    heights = np.asarray(sim.spawn.height / model.body_height, np.float32)  # skeleton scales
     tints = tint_palette(n)
     # Slots per level as the step returns them (split over K devices a level holds K shares of
     # its capacity, rounded up: jcrowd.crowd.devices.per_device_config).
@@ -295,8 +295,9 @@ def render_scenario(
     }
 
 
-def _recording_bodies(path: str, rec: Any, nlev: int, model_path: str | None) -> Any:
-    """The bodies a recording is drawn with: bound to the model it names (or ``model_path``)."""
+def _recording_bodies(path: str, rec: Any, nlev: int, model_path: str | None) -> tuple[Any, float]:
+    """The bodies a recording is drawn with, bound to the model it names (or ``model_path``),
+    and that model's ``body_height``."""
     from jcrowd.errors import RenderError
     from jcrowd.io.model_file import load_motion_model
 
@@ -308,7 +309,7 @@ def _recording_bodies(path: str, rec: Any, nlev: int, model_path: str | None) ->
         raise RenderError(
             f"{path}: recorded {nlev} levels, the model {name} has {len(model.levels)}"
         )
-    return body_levels(model)
+    return body_levels(model), model.body_height
 
 
 def render_recording(
@@ -337,8 +338,10 @@ def render_recording(
     n_frames = rec["points_0"].shape[0] if frames is None else min(frames, rec["points_0"].shape[0])
     caps = [rec[f"points_{lv}"].shape[1] for lv in range(nlev)]
     w, h = size or (1280, 720)
-    bodies = _recording_bodies(path, rec, nlev, model_path) if style == "body" else None
-    heights = np.asarray(rec["height"], np.float32)
+    bodies, body_height = (
+        _recording_bodies(path, rec, nlev, model_path) if style == "body" else (None, 1.0)
+    )
+    heights = np.asarray(rec["height"] / body_height, np.float32)  # statures → skeleton scales
     tints = tint_palette(len(heights))
     group_colors = np.asarray(rec["color"], np.float32)
     fov, near, far = (float(v) for v in rec["lens"])

@@ -79,6 +79,9 @@ class CrowdModel(eqx.Module):
         feet: left ankle, left toe, right ankle, right toe joints (for foot locking).
         double_support: static aligned phases where both feet are planted, one per step of the
             cycle (:func:`double_support_phases`): a walker that stops waits at one of them.
+        body_height: the model's drawn body height per metre of skeleton
+            (:attr:`~jcrowd.model.motion_model.MotionModel.body_height`): an agent's stature
+            is its skeleton scale ``state.height`` times this.
     """
 
     decoders: Decoders
@@ -91,6 +94,7 @@ class CrowdModel(eqx.Module):
     index: tuple[int, int, int, int, int] = eqx.field(static=True)
     feet: tuple[int, int, int, int] = eqx.field(static=True)
     double_support: tuple[float, ...] = eqx.field(static=True, default=())
+    body_height: float = eqx.field(static=True, default=1.0)
 
     @property
     def frames(self) -> int:
@@ -135,6 +139,7 @@ def build_crowd_model(model: MotionModel) -> CrowdModel:
         index,  # type: ignore[arg-type]
         foot_joints,
         double_support_phases(dec, mean_clip, foot_joints),
+        float(model.body_height),
     )
 
 

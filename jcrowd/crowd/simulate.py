@@ -234,7 +234,7 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
     if not scenario.layout.empty:
         world, _ = build_scene(scenario, sp, cast(GridSpec, config.grid), config.reach)
     key_slots, key_sources = jax.random.split(jax.random.key(scenario.seed))
-    arrays = _state_arrays(scenario, sp, world is not None)
+    arrays = _state_arrays(scenario, sp, world is not None, model.body_height)
     pool = None
     if queue is not None:
         n0 = scenario.num_agents
@@ -243,7 +243,7 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         arrays["agent"] = np.where(np.arange(agents) < n0, np.arange(agents), -1)
         reservoir = init_state(
             crowd,
-            _state_arrays(scenario, sources, world is not None),
+            _state_arrays(scenario, sources, world is not None, model.body_height),
             key_sources,
             resting=config.avoid,
         )
@@ -274,12 +274,15 @@ def _in_grid_order(sp: Spawn, grid: GridSpec) -> Spawn:
     return Spawn(**{f.name: getattr(sp, f.name)[order] for f in dataclasses.fields(Spawn)})
 
 
-def _state_arrays(scenario: Scenario, sp: Spawn, fields: bool) -> dict[str, Any]:
-    """The spawn's columns as :func:`init_state` takes them (device arrays)."""
+def _state_arrays(
+    scenario: Scenario, sp: Spawn, fields: bool, body_height: float
+) -> dict[str, Any]:
+    """The spawn's columns as :func:`init_state` takes them (device arrays): the statures
+    become skeleton scales (``height / body_height``)."""
     arrays: dict[str, Any] = {
         "position": sp.position,
         "heading": sp.heading,
-        "height": sp.height,
+        "height": sp.height / body_height,
         "speed": sp.speed,
         "waypoints": sp.waypoints,
         "num_waypoints": sp.num_waypoints,

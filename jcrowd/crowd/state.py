@@ -158,7 +158,7 @@ class CrowdState(eqx.Module):
     far_core: Float[Array, "N RR"]
     far_valid: Bool[Array, " N"]
     alive: Bool[Array, " N"]
-    height: Float[Array, " N"]  # m (style)
+    height: Float[Array, " N"]  # skeleton scale (m): stature / CrowdModel.body_height
     speed: Float[Array, " N"]  # m/s (style)
     waypoints: Float[Array, "N K 2"]
     num_waypoints: Int[Array, " N"]
@@ -252,7 +252,9 @@ def init_state(
     need a choice within the first half cycle — twice the steady rate — beyond the per-step
     ``refresh`` budget, and leave a backlog of deferred choices.)
 
-    ``spawn`` holds ``position (N, 2)``, ``heading``, ``height``, ``speed`` ``(N,)``,
+    ``spawn`` holds ``position (N, 2)``, ``heading``, ``height`` (the skeleton's scale, not
+    the stature: :func:`~jcrowd.crowd.simulate.prepare` divides by ``cm.body_height``), ``speed``
+    ``(N,)``,
     ``waypoints (N, K, 2)``, ``num_waypoints (N,)``, ``loop (N,)``, and optionally ``radius``
     ``(N,)`` (default :data:`DEFAULT_RADIUS`), ``field`` ``(N, K)`` (each waypoint's
     navigation field, :func:`jcrowd.pedestrians.scene.build_scene`; default −1: none), and for a

@@ -240,13 +240,14 @@ def _level_of_detail(
     """Stage 1: frustum and detail culling, each agent's level by distance (with hysteresis),
     and the buckets of the levels' static capacities filled by importance."""
     nlev = len(cm.decoders.levels)
-    centre = (state.x, 0.55 * state.height, state.z)
+    stature = state.height * cm.body_height  # the drawn body's height (m)
+    centre = (state.x, 0.55 * stature, state.z)
     visible = state.alive & in_frustum(view, centre, radius=0.6 * 1.9)
     dist = jnp.sqrt(sum((c - view.eye[k]) ** 2 for k, c in enumerate(centre)))
     previous = jnp.minimum(state.level, nlev - 1)
     thresholds = jnp.asarray(config.thresholds, jnp.float32)
     min_level = distance_levels(dist, previous, thresholds, config.hysteresis)
-    pixels = screen_height_px(view, centre, state.height)
+    pixels = screen_height_px(view, centre, stature)
     importance = -dist if config.importance == "distance" else pixels
     detailed = visible & (pixels >= config.min_pixels)
     return _Lod(visible, assign_buckets(min_level, importance, detailed, config.capacities))

@@ -6,6 +6,7 @@ this package reads and writes them.
 """
 
 from jcrowd.io.atomic import write_atomic as write_atomic
+from jcrowd.io.body_file import with_body_height as with_body_height
 from jcrowd.io.bvh import UNIT_SCALES as UNIT_SCALES
 from jcrowd.io.bvh import BVHClip as BVHClip
 from jcrowd.io.bvh import load_bvh as load_bvh

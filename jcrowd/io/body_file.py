@@ -10,17 +10,21 @@ int32, ``mesh{r}/bones`` ``(V, 4)`` uint8 and ``mesh{r}/weights`` ``(V, 4)`` flo
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from jcrowd.errors import StoreError, where
+from jcrowd.errors import SkinError, StoreError, where
+from jcrowd.io.resources import body_path
 from jcrowd.io.store import load_store, save_store
-from jcrowd.motion.body import INFLUENCES, Body, BodyMesh
+from jcrowd.model.motion_model import MotionModel
+from jcrowd.motion.body import INFLUENCES, Body, BodyMesh, bind_body, rest_stature
+from jcrowd.motion.clip import rest_forward
 
-__all__ = ["KIND", "load_body", "save_body"]
+__all__ = ["KIND", "load_body", "save_body", "with_body_height"]
 
 KIND = "body"
 _FIELDS = ("vertices", "normals", "triangles", "bones", "weights")
@@ -90,3 +94,19 @@ def load_body(path: str | os.PathLike[str]) -> Body:
     if not meshes:
         raise StoreError(f"{p}: expected at least one mesh, found none")
     return Body(bones, parents, t["rig/heads"], t["rig/tails"], tuple(meshes))
+
+
+def with_body_height(model: MotionModel, body: Body | None = None) -> MotionModel:
+    """``model`` with :attr:`~jcrowd.model.motion_model.MotionModel.body_height` measured on
+    ``body`` (default: the shipped body) bound to its skeleton
+    (:func:`~jcrowd.motion.body.rest_stature`). A skeleton the body cannot be bound to (no
+    legs or arms found by name) keeps the model's value: no body is drawn on it."""
+    try:
+        bound = bind_body(
+            load_body(body_path()) if body is None else body,
+            model.skeleton,
+            rest_forward(model.skeleton),
+        )
+    except SkinError:
+        return model
+    return dataclasses.replace(model, body_height=rest_stature(bound))

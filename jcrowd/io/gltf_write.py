@@ -9,11 +9,12 @@ Layout of the file:
   ``mesh`` of its own whose four primitives share those accessors and differ only in their
   materials (its clothes; materials of equal colour are shared).
 - **A skeleton and a skin per agent.** Joint nodes named ``agent<i>/<joint>``; the root's
-  translation is the recorded root, every other joint's is its offset times the agent's height,
-  so the rest pose is the skeleton's. The inverse bind matrix of joint ``j`` is
-  ``[h I | −h p̄_j]`` (``p̄_j`` its rest position for a 1 m skeleton, ``h`` the agent's height):
-  it maps the shared 1 m mesh into the joint's frame of a body ``h`` tall, so one mesh serves
-  every height.
+  translation is the recorded root, every other joint's is its offset times the agent's
+  skeleton scale ``h``, so the rest pose is the skeleton's. The inverse bind matrix of joint
+  ``j`` is ``[h I | −h p̄_j]`` (``p̄_j`` its rest position for a 1 m skeleton): it maps the shared
+  1 m mesh into the joint's frame of a skeleton ``h`` tall, so one mesh serves every height.
+  ``h`` is the agent's stature over the model's ``body_height``: the body drawn is the agent's
+  ``height`` tall.
 - **One animation.** Per agent, every joint's rotation and the root's translation at each
   frame (linear), and the root's scale, 1 while the agent is in the scene and 0 otherwise
   (step): glTF has no visibility, and a skin scaled to nothing draws nothing.
@@ -45,9 +46,9 @@ _GROUND = (0.74, 0.74, 0.70)
 
 @dataclass(frozen=True)
 class CrowdAgent:
-    """One agent to export: its full-detail motion (skeleton scaled to its height), its height
-    (m), whether it is in the scene at each frame ``(F,)``, and its skin, top and bottom
-    colours ``(3, 3)``."""
+    """One agent to export: its full-detail motion (skeleton scaled by ``height``), that
+    skeleton scale ``height`` (m; the stature over the model's ``body_height``), whether it is
+    in the scene at each frame ``(F,)``, and its skin, top and bottom colours ``(3, 3)``."""
 
     motion: Motion
     height: float

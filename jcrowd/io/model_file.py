@@ -3,7 +3,8 @@
 Stored with :mod:`jcrowd.io.store` (safetensors + JSON metadata, checksum, atomic write) under
 the kind ``"motion-model"``. Every array of each level's
 :class:`~jcrowd.kriging.universal.KrigingModel` is saved by its field name, so loading rebuilds
-the same model bit for bit without refitting.
+the same model bit for bit without refitting. The model's ``body_height`` is not stored: loading
+measures it on the shipped body (:func:`jcrowd.io.body_file.with_body_height`).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jcrowd.errors import StoreError
+from jcrowd.io.body_file import with_body_height
 from jcrowd.io.store import load_store, save_store, skeleton_from_json, skeleton_to_json
 from jcrowd.kriging.universal import KrigingModel
 from jcrowd.kriging.variogram_fit import VariogramFit
@@ -107,4 +109,4 @@ def load_motion_model(path: str | os.PathLike[str]) -> tuple[MotionModel, dict[s
         )
     except (KeyError, TypeError, ValueError) as e:
         raise StoreError(f"{path}: the motion-model contents are incomplete: {e}") from e
-    return model, meta.get("extra", {})
+    return with_body_height(model), meta.get("extra", {})

@@ -85,6 +85,12 @@ class MotionModel:
         levels: finest first.
         fps: the model rate of synthesized clips.
         default_height: height (m) used when ``height`` is not a control.
+        body_height: the standing height of the body drawn on the skeleton, per metre of the
+            skeleton (its rest joints and End Sites span 1 m). Agents' heights are statures:
+            the crowd step scales the skeleton by ``height / body_height``, so the drawn body,
+            not its joints, is ``height`` tall. Loading a model file binds the shipped body and
+            measures it (:func:`jcrowd.io.with_body_height`); 1.0 (the joints span the height)
+            for a model that has no body bound, such as one just fitted in memory.
     """
 
     skeleton: Skeleton
@@ -94,6 +100,7 @@ class MotionModel:
     levels: tuple[MotionLevel, ...]
     fps: float
     default_height: float
+    body_height: float = 1.0
 
 
 def sample_cores(tucker_core: np.ndarray, u_samples: np.ndarray) -> np.ndarray:

@@ -7,7 +7,8 @@ chosen. That is enough to re-synthesize the agent at level 0 whatever level it w
 the pose vector at each step is the kriged clip at τ (000 Eqs. 4–5, 8), blended with the next
 clip over the second half of the cycle exactly as :mod:`jcrowd.crowd.stepping` blends near
 agents, and the root is put where the run put it. Every joint of the model's skeleton is
-written (joints a level drops keep their reference rotation), scaled to the agent's height.
+written (joints a level drops keep their reference rotation), the skeleton scaled by the agent's
+recorded height (its stature) over the model's ``body_height``, as the step scales it.
 """
 
 from __future__ import annotations
@@ -56,7 +57,7 @@ def agent_motion(model: MotionModel, recording: Mapping[str, np.ndarray], agent:
     x = np.clip((tau - half) / half, 0.0, 1.0)
     s = np.where(recording["has_next"][:, agent], x * x * (3 - 2 * x), 0.0)[:, None]
     y = y + s * (y_next - y)
-    height = float(recording["height"][agent])
+    height = float(recording["height"][agent]) / model.body_height  # the skeleton's scale
     layout, j = model.layout, model.layout.num_joints
     heading = np.asarray(recording["heading"][:, agent], np.float64)
     root = quat_mul(yaw_quat(heading), quat_from_expmap(y[:, layout.tilt]))

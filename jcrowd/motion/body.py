@@ -59,6 +59,7 @@ __all__ = [
     "BoundBody",
     "bind_body",
     "map_bones",
+    "rest_stature",
 ]
 
 INFLUENCES = 4
@@ -135,6 +136,13 @@ class BoundBody:
     joint_of_bone: Int[np.ndarray, " B"]
     scale: float
     fitted: Float[np.ndarray, "B 3"] | None = None
+
+
+def rest_stature(bound: BoundBody) -> float:
+    """The bound body's standing height for its 1 m skeleton: the finest mesh's rest vertices,
+    top minus bottom along Y (sole to crown; the shipped body on ``cmu16``: 1.147)."""
+    y = np.asarray(bound.meshes[0].vertices, np.float64)[:, 1]
+    return float(y.max() - y.min())
 
 
 def rest_joints_and_height(skeleton: Skeleton) -> tuple[np.ndarray, float]:
