@@ -33,9 +33,19 @@ def setup():
     return model, build_decoders(model)
 
 
+def _closed(y):
+    """The cycle closed by hand: every element but the rates (velocity 1–2, yaw rate 3, ΔA
+    last) minus its end-to-start difference times τ / (T − 1)."""
+    t = np.arange(len(y))[:, None] / (len(y) - 1)
+    rows = np.ones(y.shape[1], bool)
+    rows[[1, 2, 3, y.shape[1] - 1]] = False
+    return y - t * (y[-1] - y[0]) * rows
+
+
 def _reference_points(model, c, level, height):
-    """Oracle: the offline path — kriged pose vectors, full decode, full-skeleton FK."""
-    y = level_pose_vectors(model, np.asarray(c), level)
+    """Oracle: the offline path — kriged pose vectors closed over the cycle (:func:`_closed`),
+    full decode, full-skeleton FK."""
+    y = _closed(level_pose_vectors(model, np.asarray(c), level))
     skel = model.skeleton.scaled(height)
     motion, _ = decode_pose_vectors(y, model.layout, skel, height, model.fps)
     rot, pos = forward_kinematics(
@@ -59,6 +69,37 @@ def test_agent_decode_equals_offline_synthesis(setup, level):
         pts = level_points(lv, y, jnp.asarray(root[t, [0, 2]]), jnp.float32(yaw[t]), height)
         # float32 decode (tables, FK) vs the float64 offline path on a 1.7 m body: 1 mm.
         np.testing.assert_allclose(np.asarray(pts), ref[t], atol=1e-3)
+
+
+@pytest.mark.parametrize("level", [0, 3, 5])
+def test_a_cycle_ends_in_the_pose_it_starts_with(setup, level):
+    """The step's decode closes each clip's cycle (:func:`jcrowd.model.posevec.cycle_closing`):
+    at τ = T − 1 every pose element equals its value at τ = 0 (the offline, unclosed cycles
+    differ there by tenths of a radian), the rates equal the offline ones at every τ, and a
+    fractional τ matches the hand-closed offline vectors interpolated linearly."""
+    model, dec = setup
+    lv = dec.levels[level]
+    last = lv.u_time.shape[0] - 1
+    rows = np.ones(model.layout.size, bool)
+    rows[[1, 2, 3, model.layout.size - 1]] = False
+    keep = np.concatenate(
+        [np.arange(7), model.layout.joint_elements(sorted(set(model.levels[level].joints) - {0}))]
+    )
+    for c in ([0.1, 1.2, 0.4], [-0.2, 0.9, -0.6], [0.0, 1.5, 0.0]):
+        y_off = level_pose_vectors(model, np.asarray(c), level)
+        assert np.abs(y_off[-1, rows] - y_off[0, rows]).max() > 0.02  # open offline
+        core = clip_core(lv, clip_weights(dec, jnp.asarray(c, jnp.float32)))
+        y = {
+            t: np.asarray(pose_from_coeffs(lv, coeffs_at(lv, core, jnp.float32(t))))
+            for t in (0, 37.5, last)
+        }
+        body = rows[keep]  # pose rows among the level's own (root rows and kept joints)
+        np.testing.assert_allclose(y[last][:-1][body], y[0][:-1][body], atol=1e-5)
+        want = _closed(y_off)
+        mid = 0.5 * (want[37] + want[38])
+        np.testing.assert_allclose(y[37.5][:-1], mid[keep], atol=2e-4)
+        np.testing.assert_allclose(y[37.5][-1], mid[-1], rtol=1e-4)
+        np.testing.assert_allclose(y[0][[1, 2, 3]], y_off[0, [1, 2, 3]], atol=1e-5)
 
 
 def test_root_rates_integrate_to_the_offline_root_path(setup):

@@ -9,7 +9,10 @@ the residual cores and the trend planes (000 Eq. 8), and the pose vector at alig
 
 Per agent-frame: ``K(c) = a V`` (``A × R_P R_T``; under ``vmap`` one GEMM for a whole bucket;
 ``V`` is stored as two factors of its rank, :func:`_factor_cores`), ``w_T(τ)`` from two rows of
-``U_T``, ``g = K w_T`` and ``y = U_P g``. Finer levels keep no per-agent core between steps (a
+``U_T``, ``g = K w_T`` and ``y = U_P g``, closed over the cycle in its pose rows: minus
+``(τ / (T−1)) U_P K d`` there (:func:`jcrowd.model.posevec.cycle_closing`), so that the pose at
+the cycle's last aligned frame is its first and a hand-over to the next cycle does not jump.
+Finer levels keep no per-agent core between steps (a
 full-level core per agent at 100k agents would be 480 MB, DESIGN §5, and reading cores back
 from memory is no cheaper in the step's chunks than computing them); only the coarsest level's
 small core is kept while a clip plays (:func:`jcrowd.crowd.state.refresh_far_cores`). Nor is a
@@ -40,6 +43,7 @@ from jaxtyping import Array, Float
 from jcrowd.kriging.model import KrigingModel
 from jcrowd.kriging.universal import kriging_weights
 from jcrowd.model.motion_model import MotionModel
+from jcrowd.model.posevec import cycle_closing
 from jcrowd.motion.rotation import quat_from_expmap, quat_mul, quat_rotate, quat_to_matrix, yaw_quat
 from jcrowd.motion.skeleton import Skeleton, forward_kinematics, kept_ancestor_frame
 
@@ -71,6 +75,9 @@ class LevelDecoder(eqx.Module):
         u_time: ``(T, R_T)``.
         u_pose: ``(P_l, R_P)`` scaled rows of ``U_P`` the level decodes: the 7 root rows, the
             kept joints' exp-map rows, then ΔA.
+        u_close: ``(P_l, R_P)``: ``u_pose`` with its rate rows zeroed (the rows a cycle closes
+            in, :func:`jcrowd.model.posevec.cycle_closing`).
+        closing: ``(R_T,)`` the time basis's move over the cycle, ``Ũ_T[T−1] − Ũ_T[0]``.
         local_ref: ``(K, 4)`` constant left factor of each kept joint's local rotation (the
             dropped ancestors' reference rotations, then the joint's own reference).
         skeleton: the kept joints as a skeleton (offsets through dropped ancestors), 1 m tall.
@@ -84,6 +91,8 @@ class LevelDecoder(eqx.Module):
     cores: Float[Array, "Q RR"]
     u_time: Float[Array, "T RT"]
     u_pose: Float[Array, "P R"]
+    u_close: Float[Array, "P R"]
+    closing: Float[Array, " RT"]
     local_ref: Float[Array, "K 4"]
     skeleton: Skeleton
     anchor: tuple[int, ...] = eqx.field(static=True)
@@ -140,6 +149,7 @@ def _level_decoder(model: MotionModel, level: int) -> LevelDecoder:
         [np.arange(_ROOT_ROWS), layout.joint_elements(kept[1:]), [layout.delta_a]]
     ).astype(int)
     u_pose = (np.asarray(lv.u_pose, np.float64) * layout.scale[:, None])[rows]
+    u_close = u_pose * layout.pose_rows()[rows, None]
     reference = np.asarray(layout.reference, np.float64)
     kept_set = set(kept)
     parents = [-1]
@@ -179,6 +189,8 @@ def _level_decoder(model: MotionModel, level: int) -> LevelDecoder:
         mix_basis=None if basis is None else jnp.asarray(basis, f32),
         u_time=jnp.asarray(lv.u_time, f32),
         u_pose=jnp.asarray(u_pose, f32),
+        u_close=jnp.asarray(u_close, f32),
+        closing=jnp.asarray(cycle_closing(lv.u_time), f32),
         local_ref=jnp.asarray(np.stack(local_ref), f32),
         skeleton=Skeleton(names, tuple(parents), jnp.asarray(np.stack(offsets), f32)),
         anchor=tuple(anchor),
@@ -249,8 +261,10 @@ def clip_core(level: LevelDecoder, a: Float[Array, " A"]) -> Float[Array, "RP RT
 
 def coeffs_at(
     level: LevelDecoder, core: Float[Array, "RP RT"], tau: Float[Array, ""]
-) -> Float[Array, " R"]:
-    """``g = K w_T(τ)`` (000 Eq. 5) for one agent's core; τ is clamped to ``[0, T − 1]``.
+) -> Float[Array, " R2"]:
+    """``[K w_T(τ); (τ / (T−1)) K d]`` ``(2 R_P,)`` for one agent's core (000 Eq. 5 and the
+    cycle's closing ramp, :func:`jcrowd.model.posevec.cycle_closing`); τ is clamped to
+    ``[0, T − 1]``. Linear in the core, so blending two clips' coefficients blends their poses.
 
     ``w_T(τ)`` interpolates linearly between the rows of ``Ũ_T`` round τ.
     """
@@ -260,20 +274,26 @@ def coeffs_at(
     frac = tau - i0
     w = jax.lax.dynamic_slice_in_dim(level.u_time, i0.astype(jnp.int32), 2, axis=0)
     w_t = w[0] + frac * (w[1] - w[0])
-    return jnp.dot(core, w_t, precision=_HI)
+    ramp = (tau / last) * level.closing
+    return jnp.dot(core, jnp.stack([w_t, ramp], axis=1), precision=_HI).T.reshape(-1)
 
 
 def decode_coeffs(
     level: LevelDecoder, a: Float[Array, " A"], tau: Float[Array, ""]
-) -> Float[Array, " R"]:
-    """``g = K(c) w_T(τ)`` (000 Eqs. 5, 8) for one agent: :func:`clip_core` then
-    :func:`coeffs_at`. To evaluate one clip at several phases, compute the core once."""
+) -> Float[Array, " R2"]:
+    """:func:`coeffs_at` of the clip's core ``K(c)`` (000 Eqs. 5, 8) for one agent
+    (:func:`clip_core` first). To evaluate one clip at several phases, compute the core once."""
     return coeffs_at(level, clip_core(level, a), tau)
 
 
-def pose_from_coeffs(level: LevelDecoder, g: Float[Array, " R"]) -> Float[Array, " P"]:
-    """The level's pose-vector rows ``y = U_P g`` (scaled): root rows, kept joints, ΔA."""
-    return jnp.dot(level.u_pose, g, precision=_HI)
+def pose_from_coeffs(level: LevelDecoder, g: Float[Array, " R2"]) -> Float[Array, " P"]:
+    """The level's pose-vector rows (scaled; root rows, kept joints, ΔA) from
+    :func:`coeffs_at`'s ``[g; r]``: ``y = U_P g − U_close r``, the cycle closed in its pose
+    rows."""
+    r_p = level.u_pose.shape[1]
+    return jnp.dot(level.u_pose, g[:r_p], precision=_HI) - jnp.dot(
+        level.u_close, g[r_p:], precision=_HI
+    )
 
 
 @dataclass(frozen=True)

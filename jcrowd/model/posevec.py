@@ -56,6 +56,7 @@ from jcrowd.motion.skeleton import Skeleton
 
 __all__ = [
     "PoseLayout",
+    "cycle_closing",
     "decode_clip",
     "decode_pose_vectors",
     "encode_sample",
@@ -106,6 +107,13 @@ class PoseLayout:
     @property
     def delta_a(self) -> int:
         return self.size - 1
+
+    def pose_rows(self) -> np.ndarray:
+        """``(P,)`` bool: the elements that are poses (root height and tilt, joint rotations), not
+        rates (velocity, yaw rate, ΔA). A cycle closes in these (:func:`cycle_closing`)."""
+        rows = np.ones(self.size, bool)
+        rows[[*range(self.size)[self.velocity], self.yaw_rate, self.delta_a]] = False
+        return rows
 
     def joint_elements(self, joints: list[int] | tuple[int, ...]) -> np.ndarray:
         """Indices of the elements of the given non-root joints (for progressive reduction)."""
@@ -231,3 +239,19 @@ def decode_clip(
     y[:, layout.delta_a] = np.maximum(y[:, layout.delta_a], 1e-3)
     motion, times = decode_pose_vectors(y, layout, skeleton, height, fps)
     return unwarp(motion, times)
+
+
+def cycle_closing(u_time: np.ndarray) -> np.ndarray:
+    """``d = Ũ_T[T−1] − Ũ_T[0]`` ``(R_T,)``: what a clip's time basis moves between the cycle's
+    first and last aligned frame.
+
+    A clip's pose at the last aligned frame is the next cycle's first pose in the capture, but
+    the kriged cycles do not close (the captured cycles are not periodic: at level 0 the pose
+    rows differ by up to 0.9 rad between the two ends of the default model's samples). Synthesis
+    closes them in the pose rows (:meth:`PoseLayout.pose_rows`) by a linear ramp,
+    ``y(τ) − (τ / (T−1)) · (U_P K d)``, so a cycle hands over to the next without a jump; the rate
+    rows keep their values, so stride and cycle duration do not change. The ramp moves a pose by
+    at most its own non-closure, spread over the cycle.
+    """
+    u = np.asarray(u_time, np.float64)
+    return u[-1] - u[0]

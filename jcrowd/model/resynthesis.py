@@ -5,7 +5,8 @@ A recording made with ``jcrowd run --record all`` holds, per step and agent, the
 and heading, the phase τ, the current and next clip's controls and whether a next clip was
 chosen. That is enough to re-synthesize the agent at level 0 whatever level it was drawn at:
 the pose vector at each step is the kriged clip at τ (000 Eqs. 4–5, 8), blended with the next
-clip over the second half of the cycle exactly as :mod:`jcrowd.crowd.stepping` blends near
+clip over the second half of the cycle and closed over the cycle
+(:func:`jcrowd.model.posevec.cycle_closing`) exactly as :mod:`jcrowd.crowd.stepping` blends near
 agents, and the root is put where the run put it. Every joint of the model's skeleton is
 written (joints a level drops keep their reference rotation), the skeleton scaled by the agent's
 recorded height (its stature) over the model's ``body_height``, as the step scales it.
@@ -21,6 +22,7 @@ import numpy as np
 from jcrowd.errors import JcrowdError
 from jcrowd.kriging.universal import predict
 from jcrowd.model.motion_model import MotionModel
+from jcrowd.model.posevec import cycle_closing
 from jcrowd.motion.clip import Motion
 from jcrowd.motion.rotation import quat_from_expmap, quat_mul, quat_normalize, yaw_quat
 
@@ -39,7 +41,10 @@ def _pose_vectors(model: MotionModel, c: np.ndarray, tau: np.ndarray) -> np.ndar
     frac = (t - i0)[:, None]
     w = lv.u_time[i0] * (1 - frac) + lv.u_time[i0 + 1] * frac  # 000 Eq. 5
     g = np.einsum("frs,fs->fr", cores, w)
-    return (g @ lv.u_pose.T) * model.layout.scale
+    # The cycle closed in its pose rows as the step closes it (posevec.cycle_closing).
+    ramp = (t / last)[:, None] * (cores @ cycle_closing(lv.u_time))
+    rows = model.layout.pose_rows()
+    return (g @ lv.u_pose.T - rows * (ramp @ lv.u_pose.T)) * model.layout.scale
 
 
 def agent_motion(model: MotionModel, recording: Mapping[str, np.ndarray], agent: int) -> Motion:
