@@ -75,8 +75,9 @@ class LevelDecoder(eqx.Module):
         u_time: ``(T, R_T)``.
         u_pose: ``(P_l, R_P)`` scaled rows of ``U_P`` the level decodes: the 7 root rows, the
             kept joints' exp-map rows, then ΔA.
-        u_close: ``(P_l, R_P)``: ``u_pose`` with its rate rows zeroed (the rows a cycle closes
-            in, :func:`jcrowd.model.posevec.cycle_closing`).
+        u_rates: ``(4, R_P)`` the rate rows of ``u_pose`` (velocity, yaw rate, ΔA).
+        u_poses: ``(P_l − 4, R_P)`` its pose rows (root height and tilt, kept joints), which
+            a cycle closes in (:func:`jcrowd.model.posevec.cycle_closing`).
         closing: ``(R_T,)`` the time basis's move over the cycle, ``Ũ_T[T−1] − Ũ_T[0]``.
         local_ref: ``(K, 4)`` constant left factor of each kept joint's local rotation (the
             dropped ancestors' reference rotations, then the joint's own reference).
@@ -91,7 +92,8 @@ class LevelDecoder(eqx.Module):
     cores: Float[Array, "Q RR"]
     u_time: Float[Array, "T RT"]
     u_pose: Float[Array, "P R"]
-    u_close: Float[Array, "P R"]
+    u_rates: Float[Array, "4 R"]
+    u_poses: Float[Array, "Pp R"]
     closing: Float[Array, " RT"]
     local_ref: Float[Array, "K 4"]
     skeleton: Skeleton
@@ -149,7 +151,7 @@ def _level_decoder(model: MotionModel, level: int) -> LevelDecoder:
         [np.arange(_ROOT_ROWS), layout.joint_elements(kept[1:]), [layout.delta_a]]
     ).astype(int)
     u_pose = (np.asarray(lv.u_pose, np.float64) * layout.scale[:, None])[rows]
-    u_close = u_pose * layout.pose_rows()[rows, None]
+    poses = layout.pose_rows()[rows]
     reference = np.asarray(layout.reference, np.float64)
     kept_set = set(kept)
     parents = [-1]
@@ -189,7 +191,8 @@ def _level_decoder(model: MotionModel, level: int) -> LevelDecoder:
         mix_basis=None if basis is None else jnp.asarray(basis, f32),
         u_time=jnp.asarray(lv.u_time, f32),
         u_pose=jnp.asarray(u_pose, f32),
-        u_close=jnp.asarray(u_close, f32),
+        u_rates=jnp.asarray(u_pose[~poses], f32),
+        u_poses=jnp.asarray(u_pose[poses], f32),
         closing=jnp.asarray(cycle_closing(lv.u_time), f32),
         local_ref=jnp.asarray(np.stack(local_ref), f32),
         skeleton=Skeleton(names, tuple(parents), jnp.asarray(np.stack(offsets), f32)),
@@ -262,9 +265,10 @@ def clip_core(level: LevelDecoder, a: Float[Array, " A"]) -> Float[Array, "RP RT
 def coeffs_at(
     level: LevelDecoder, core: Float[Array, "RP RT"], tau: Float[Array, ""]
 ) -> Float[Array, " R2"]:
-    """``[K w_T(τ); (τ / (T−1)) K d]`` ``(2 R_P,)`` for one agent's core (000 Eq. 5 and the
-    cycle's closing ramp, :func:`jcrowd.model.posevec.cycle_closing`); τ is clamped to
-    ``[0, T − 1]``. Linear in the core, so blending two clips' coefficients blends their poses.
+    """``[K w_T(τ); K (w_T(τ) − (τ / (T−1)) d)]`` ``(2 R_P,)`` for one agent's core (000
+    Eq. 5; the second for the pose rows, closed over the cycle,
+    :func:`jcrowd.model.posevec.cycle_closing`); τ is clamped to ``[0, T − 1]``. Linear in the
+    core, so blending two clips' coefficients blends their poses.
 
     ``w_T(τ)`` interpolates linearly between the rows of ``Ũ_T`` round τ.
     """
@@ -274,8 +278,10 @@ def coeffs_at(
     frac = tau - i0
     w = jax.lax.dynamic_slice_in_dim(level.u_time, i0.astype(jnp.int32), 2, axis=0)
     w_t = w[0] + frac * (w[1] - w[0])
-    ramp = (tau / last) * level.closing
-    return jnp.dot(core, jnp.stack([w_t, ramp], axis=1), precision=_HI).T.reshape(-1)
+    closed = w_t - (tau / last) * level.closing
+    return jnp.concatenate(
+        [jnp.dot(core, w_t, precision=_HI), jnp.dot(core, closed, precision=_HI)]
+    )
 
 
 def decode_coeffs(
@@ -288,12 +294,12 @@ def decode_coeffs(
 
 def pose_from_coeffs(level: LevelDecoder, g: Float[Array, " R2"]) -> Float[Array, " P"]:
     """The level's pose-vector rows (scaled; root rows, kept joints, ΔA) from
-    :func:`coeffs_at`'s ``[g; r]``: ``y = U_P g − U_close r``, the cycle closed in its pose
-    rows."""
+    :func:`coeffs_at`'s ``[g; g_closed]``: the rate rows (1–3 and the last) from ``g``, the
+    pose rows from ``g_closed``."""
     r_p = level.u_pose.shape[1]
-    return jnp.dot(level.u_pose, g[:r_p], precision=_HI) - jnp.dot(
-        level.u_close, g[r_p:], precision=_HI
-    )
+    rates = jnp.dot(level.u_rates, g[:r_p], precision=_HI)
+    poses = jnp.dot(level.u_poses, g[r_p:], precision=_HI)
+    return jnp.concatenate([poses[:1], rates[:3], poses[1:], rates[3:]])
 
 
 @dataclass(frozen=True)
