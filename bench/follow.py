@@ -13,9 +13,14 @@ recording (skate and pops over each agent slot's first life, :func:`alive_span`)
   (from the simulated positions, ``(x_{f+1} − x_f)·fps``) over agent-frames moving faster than
   ``SLOW_M_S``: a standing person's velocity has no direction.
 - ``skate_cm_per_frame``: every agent re-synthesized at level 0 over its time in the scene with
-  the root where the run put it (:func:`jcrowd.crowd.agent_motion`), foot skate as
-  :func:`jcrowd.model.foot_skate` (``bench/skate.py``'s measure); ``skate_captures_cm_per_frame``
-  the same on the ``cmu16`` captures (the default model's data, 30 fps), ``skate_ratio`` the two.
+  the root where the run put it (:func:`jcrowd.crowd.agent_motion`), its feet planted as the
+  step plants a near agent's (:func:`jcrowd.crowd.planting.plant_sequence`, where the scene's
+  dynamics and foot lock are on), foot skate as :func:`jcrowd.model.foot_skate`
+  (``bench/skate.py``'s measure) on those joints; ``skate_captures_cm_per_frame`` the same on
+  the ``cmu16`` captures (the default model's data, 30 fps), ``skate_ratio`` the two;
+  ``skate_drawn_level0_cm_per_frame`` (and ``_ratio``) the same measure on the drawn joints of
+  stretches of at least ``LEVEL0_RUN`` frames drawn at level 0.
+  The jumps below compare the drawn joints with this planted level-0 walker.
 - ``slow_share``: agent-frames whose simulated speed is below ``SLOW_M_S``;
   ``standing_share``: alive agent-frames standing (the step's ``stands``: the phase waiting at
   a double-support phase; ``0`` before the step had it);
@@ -64,16 +69,18 @@ recording (skate and pops over each agent slot's first life, :func:`alive_span`)
   smooth heading, so that bar measures how much the crowd sidesteps as well as how the walkers
   follow.
 
-``python bench/follow.py [--json] [--no-record]``; appends a row to bench/RESULTS.md.
+``python bench/follow.py [--json] [--no-record] [--plant-feet]``; appends a row to bench/RESULTS.md.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from common import ROOT, data_root, machine, report
 
@@ -81,9 +88,11 @@ from jcrowd import load_default_model
 from jcrowd.cli.run import simulate
 from jcrowd.crowd import prepare
 from jcrowd.crowd.level_blend import BLEND_SECONDS
+from jcrowd.crowd.planting import plant_sequence
 from jcrowd.io import load_dataset
 from jcrowd.model import agent_motion, foot_skate
 from jcrowd.motion.clip import joint_positions
+from jcrowd.motion.footlock import slides_of_points
 from jcrowd.motion.gait import find_feet
 from jcrowd.motion.skeleton import rest_positions
 from jcrowd.render.camera import View, project
@@ -131,13 +140,45 @@ def alive_span(alive: np.ndarray) -> tuple[int, int] | None:
     return int(start), int(stop)
 
 
-def level0_joints(model, rec: dict, agent: int, span: tuple[int, int]):
-    """The agent re-synthesized at level 0 over ``span``: its Motion and joints ``(F, J, 3)``."""
+def level0_joints(model, rec: dict, agent: int, span: tuple[int, int], cm=None):
+    """The agent re-synthesized at level 0 over ``span``: its Motion and joints ``(F, J, 3)``,
+    the joints with the feet planted as the step plants a near agent's
+    (:func:`jcrowd.crowd.planting.plant_sequence`) when ``cm`` (the crowd model) is given."""
     a, b = span
     sub = {k: rec[k][a:b] for k in PER_FRAME}
     sub["height"], sub["fps"] = rec["height"], rec["fps"]
     motion = agent_motion(model, sub, agent)
-    return motion, np.asarray(joint_positions(motion))
+    joints = np.asarray(joint_positions(motion))
+    if cm is None or not cm.legs:
+        return motion, joints
+    j = joints.shape[1]
+    size = max(max(leg[4]) for leg in cm.legs) + 1  # the legs' End Sites follow the joints
+    pts = np.concatenate([joints, np.zeros((len(joints), max(size - j, 0), 3), joints.dtype)], 1)
+    scale = float(rec["height"][agent]) / model.body_height
+    planted = plant_sequence(
+        cm.legs,
+        (float(cm.double_support[0]), float(cm.double_support[1])),
+        float(cm.frames - 1),
+        jnp.asarray(pts),
+        jnp.asarray(sub["tau"][:, agent], jnp.float32),
+        jnp.float32(scale),
+    )
+    return motion, np.asarray(planted)[:, :j]
+
+
+PLANT = False
+"""``--plant-feet``: the scenes run with :attr:`~jcrowd.crowd.state.StepConfig.plant_feet`."""
+
+LEVEL0_RUN = 30
+"""Frames: a drawn level-0 stretch this long or longer counts towards the drawn skate."""
+
+
+def level0_runs(level: np.ndarray) -> list[tuple[int, int]]:
+    """The ``[start, stop)`` stretches of frames drawn at level 0, at least :data:`LEVEL0_RUN`
+    long."""
+    edges = np.diff(np.concatenate([[0], (level == 0).astype(int), [0]]))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return [(int(a), int(b)) for a, b in zip(starts, stops, strict=True) if b - a >= LEVEL0_RUN]
 
 
 def queue_motion(tracks: list[np.ndarray], fps: float) -> dict:
@@ -290,6 +331,8 @@ def pixel_jumps(own, ref, view_ids, views) -> np.ndarray:
 
 def measure(model, name: str, steps: int | None) -> dict:
     sim, state = prepare(load_scenario(Path(ROOT) / "examples" / f"{name}.toml"), model)
+    if PLANT:
+        sim = dataclasses.replace(sim, config=dataclasses.replace(sim.config, plant_feet=True))
     seconds = min(sim.scenario.duration_s, WINDOW_S.get(name, np.inf))
     steps = steps or round(seconds * sim.scenario.fps)
     _, rec = simulate(sim, state, steps, "all")
@@ -336,6 +379,7 @@ def measure(model, name: str, steps: int | None) -> dict:
     standing_skate = float(np.mean(np.concatenate(step_feet))) if ok.any() else None
 
     skates, pops, ratios, steady, wraps, wraps0 = [], [], [], [], [], []
+    drawn_slides: list[np.ndarray] = []
     pops_px, steady_px = [], []
     cam = sim.scenario.camera
     eyes, view_ids = np.unique(
@@ -352,13 +396,18 @@ def measure(model, name: str, steps: int | None) -> dict:
         for e in eyes
     ]
     view_ids = view_ids.reshape(-1)
+    # The step plants near agents' feet with the dynamics on; the level-0 walker is planted alike.
+    planting = sim.crowd if PLANT and sim.config.avoid and sim.config.foot_lock else None
     ease = int(np.ceil(BLEND_SECONDS * fps)) + 1  # frames a level change moves the pose over
     for agent in range(n):
         span = alive_span(alive[:, agent])
         if span is None:
             continue
-        motion, ref = level0_joints(model, rec, agent, span)
-        skates.append(100 * foot_skate(motion))
+        _, ref = level0_joints(model, rec, agent, span, planting)
+        scale = float(rec["height"][agent]) / model.body_height
+        slid = slides_of_points(ref.astype(np.float64), model.skeleton.scaled(scale), fps)
+        every = np.concatenate([np.linalg.norm(step, axis=1) for _, step in slid])
+        skates.append(100 * float(every.mean()) if every.size else 0.0)
         a, b = span
         own = pts[a:b, agent, :j]
         lv = level[a:b, agent]
@@ -385,6 +434,11 @@ def measure(model, name: str, steps: int | None) -> dict:
                 ratios.append(np.nanmax(window) / normal)
                 pops_px.append(np.nanmax(np.where(wrap, np.nan, extra_px)[f : min(stop, f + ease)]))
         steady.extend(100 * extra[calm & drawn_both])
+        for r0, r1 in level0_runs(lv):
+            slid = slides_of_points(
+                own[r0:r1].astype(np.float64), model.skeleton.scaled(scale), fps
+            )
+            drawn_slides.extend(100 * np.linalg.norm(step, axis=1) for _, step in slid)
         steady_px.extend(extra_px[calm & drawn_both])
     print(f"{name}: {steps} steps, {n} agents, {len(pops)} level changes", file=sys.stderr)
 
@@ -408,6 +462,9 @@ def measure(model, name: str, steps: int | None) -> dict:
         },
         "heading_deviation_deg": {"p50": pct(head_dev, 50), "p99": pct(head_dev, 99)},
         "skate_cm_per_frame": round(float(np.mean(skates)), 3),
+        "skate_drawn_level0_cm_per_frame": (
+            round(float(np.mean(np.concatenate(drawn_slides))), 3) if drawn_slides else None
+        ),
         "slow_share": round(float(slow.sum() / max(both.sum(), 1)), 4),
         "standing_share": round(float(standing.sum() / max(alive.sum(), 1)), 4),
         "standing_skate_cm_per_frame": (
@@ -432,7 +489,10 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=0, help="steps per scene (0: its duration)")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--no-record", action="store_true")
+    ap.add_argument("--plant-feet", action="store_true", help="plant near agents' feet")
     args = ap.parse_args()
+    global PLANT
+    PLANT = args.plant_feet
     model = load_default_model()
     captures = [100 * foot_skate(c.motion) for c in load_dataset(data_root() / "cmu16")]
     ref = float(np.mean(captures))
@@ -440,6 +500,8 @@ def main() -> None:
     for name in args.scenes.split(","):
         res = measure(model, name, args.steps or None)
         res["skate_ratio"] = round(res["skate_cm_per_frame"] / ref, 2)
+        drawn = res["skate_drawn_level0_cm_per_frame"]
+        res["skate_drawn_level0_ratio"] = None if drawn is None else round(drawn / ref, 2)
         out[name] = res
     out.update(machine=machine(), jax=jax.__version__)
     rows = [
@@ -462,15 +524,17 @@ def main() -> None:
         )
     text = "\n".join(rows) + f"\n\ncmu16 captures' own skate: {ref:.3f} cm/frame"
     text += (
-        f"\n\n| scene | lower body vs travel ° p95 / p99 | drawn body turn °/s p99 | "
-        f"standing facing ° p90 | pop px p99 | steady px p99 ({PIXELS[0]}×{PIXELS[1]}) |"
-        "\n|---|---|---|---|---|---|\n"
+        f"\n\n| scene | drawn level-0 skate cm/frame (× captures) | lower body vs travel ° "
+        f"p95 / p99 | drawn body turn °/s p99 | standing facing ° p90 | pop px p99 | "
+        f"steady px p99 ({PIXELS[0]}×{PIXELS[1]}) |\n|---|---|---|---|---|---|---|\n"
     )
     for name in args.scenes.split(","):
         r = out[name]
         lb = r["lower_body_deviation_deg"]
         text += (
-            f"| {name} | {lb['p95']} / {lb['p99']} | {r['body_turn_rate_deg_s']} | "
+            f"| {name} | {_or_dash(r['skate_drawn_level0_cm_per_frame'])} "
+            f"({_or_dash(r['skate_drawn_level0_ratio'])}×) | {lb['p95']} / {lb['p99']} | "
+            f"{r['body_turn_rate_deg_s']} | "
             f"{_or_dash(r['standing_facing_deg'])} | {r['pop_px']} | {r['steady_px']} |\n"
         )
     if "entrance" in out:

@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from jcrowd.crowd.planting import Legs, leg_chains
 from jcrowd.crowd.synthesis import (
     Decoders,
     build_decoders,
@@ -44,6 +45,7 @@ from jcrowd.crowd.synthesis import (
     clip_weights,
     coeffs_at,
     level_points,
+    point_parents,
     pose_from_coeffs,
 )
 from jcrowd.errors import KrigingError
@@ -82,6 +84,8 @@ class CrowdModel(eqx.Module):
         body_height: the model's drawn body height per metre of skeleton
             (:attr:`~jcrowd.model.motion_model.MotionModel.body_height`): an agent's stature
             is its skeleton scale ``state.height`` times this.
+        legs: per foot the hip, knee, ankle and toe points and the ankle's descendants
+            (:func:`jcrowd.crowd.planting.leg_chains`, for planting the feet).
     """
 
     decoders: Decoders
@@ -95,6 +99,7 @@ class CrowdModel(eqx.Module):
     feet: tuple[int, int, int, int] = eqx.field(static=True)
     double_support: tuple[float, ...] = eqx.field(static=True, default=())
     body_height: float = eqx.field(static=True, default=1.0)
+    legs: Legs = eqx.field(static=True, default=())
 
     @property
     def frames(self) -> int:
@@ -140,6 +145,7 @@ def build_crowd_model(model: MotionModel) -> CrowdModel:
         foot_joints,
         double_support_phases(dec, mean_clip, foot_joints),
         float(model.body_height),
+        leg_chains(point_parents(model), foot_joints),
     )
 
 

@@ -44,8 +44,13 @@ class StepConfig:
         reach: a waypoint within this distance (m) counts as reached.
         importance: ``"distance"`` (nearer first) or ``"pixels"`` (taller on screen first).
         min_reliability: below this ρ the next clip is averaged with the nearest sample's clip.
-        foot_lock: near levels (≤ ``blend_max_level``) move the root so the stance foot (the
-            lowest foot joint) does not slide; the decoded root velocity is used otherwise.
+        foot_lock: near levels (≤ ``blend_max_level``) keep the stance foot from sliding:
+            without the dynamics by moving the root (the lowest foot joint stays put), with
+            them only with ``plant_feet``.
+        plant_feet: with the dynamics and ``foot_lock``, near agents' stance feet are planted
+            and their legs bent to reach them (:mod:`jcrowd.crowd.planting`). Off by default:
+            a foot held off its decoded place snaps back when its agent leaves the near levels,
+            and a walker slowing to stand builds up offsets of up to ``MAX_SLIP``.
         min_pixels: agents whose projected height is below this are not synthesized (root
             only, drawn as dots); 0 synthesizes every agent in the frustum.
         chunk: a level's bucket is decoded in chunks of at least this many slots (at most 8
@@ -79,6 +84,7 @@ class StepConfig:
     importance: str = "distance"
     min_reliability: float = 0.5
     foot_lock: bool = True
+    plant_feet: bool = False
     min_pixels: float = 3.0
     chunk: int = 64
     krige_budget: int = 0
@@ -177,6 +183,11 @@ class CrowdState(eqx.Module):
     shown: Int[Array, " N"]
     blend_from: Int[Array, " N"]
     blend_left: Float[Array, " N"]
+    # With the dynamics on, near agents' planted feet (jcrowd.crowd.planting): per foot the pin
+    # (x, z; the release offset while it swings), planted in the last frame, pinned by the toe.
+    pin: Float[Array, "N 2 2"]
+    planted: Bool[Array, "N 2"]
+    pin_toe: Bool[Array, "N 2"]
     # The slot, not its agent (jcrowd.crowd.pool): time since the start (s, the same in every
     # slot), the source agents queued for it (reservoir rows, −1 padding; one −1 column
     # without sources), how many of them it has taken, and the agent it holds (−1: none yet).
@@ -300,6 +311,9 @@ def init_state(
         shown=jnp.full(n, len(cm.decoders.levels), jnp.int32),
         blend_from=jnp.full(n, len(cm.decoders.levels), jnp.int32),
         blend_left=jnp.zeros(n, jnp.float32),
+        pin=jnp.zeros((n, 2, 2), jnp.float32),
+        planted=jnp.zeros((n, 2), bool),
+        pin_toe=jnp.zeros((n, 2), bool),
         clock=jnp.zeros(n, jnp.float32),
         # One empty column without sources: a zero-width array split over devices comes back
         # from the compiled step with another sharding and would recompile it every call.

@@ -53,6 +53,7 @@ from jcrowd.crowd.lod import (
     in_frustum,
     screen_height_px,
 )
+from jcrowd.crowd.planting import plant_feet
 from jcrowd.crowd.pool import Pool, spawn_due
 from jcrowd.crowd.schedule import schedule
 from jcrowd.crowd.state import CrowdState, Frame, StepConfig, refresh_far_cores
@@ -300,6 +301,13 @@ def _synthesis(
     nlev = len(cm.decoders.levels)
     dtau, dyaw, dx, dz = _dead_reckoning(cm, state, dt, config.avoid)
     points = []
+    # Planted feet (with the dynamics): every agent's pins are rebuilt from the near buckets.
+    plant = config.avoid and config.foot_lock and config.plant_feet and bool(cm.legs)
+    feet_out = [
+        jnp.zeros_like(state.pin),
+        jnp.zeros_like(state.planted),
+        jnp.zeros_like(state.pin_toe),
+    ]
     for lv, (slots, ok) in enumerate(zip(buckets.slots, buckets.valid, strict=True)):
         safe = jnp.where(ok, slots, 0)
         near = lv <= config.blend_max_level
@@ -321,12 +329,44 @@ def _synthesis(
         pts, t_l, yaw_l, pos_l = decode_bucket(jax.vmap(one), safe, used, chunk)
         if not in_decode:
             pts = blend.ease_bucket(pts, sum(len(s) for s in buckets.slots[:lv]))
+        if near and plant:
+            pts, feet = _plant(cm, state, safe, pts)
+            feet_out = [
+                o.at[slots].set(v, mode="drop") for o, v in zip(feet_out, feet, strict=True)
+            ]
         points.append(pts)
         dtau = dtau.at[slots].set(t_l, mode="drop")
         dyaw = dyaw.at[slots].set(yaw_l, mode="drop")
         dx = dx.at[slots].set(pos_l[:, 0], mode="drop")
         dz = dz.at[slots].set(pos_l[:, 1], mode="drop")
+    if plant:
+        state = eqx.tree_at(lambda s: (s.pin, s.planted, s.pin_toe), state, tuple(feet_out))
     return state, points, (dtau, dyaw, dx, dz)
+
+
+def _plant(
+    cm: CrowdModel, state: CrowdState, ids: Array, pts: Array
+) -> tuple[Array, tuple[Array, Array, Array]]:
+    """A near bucket's points with their stance feet planted (:mod:`jcrowd.crowd.planting`),
+    and its agents' new pins."""
+    last = float(cm.frames - 1)
+    start = (float(cm.double_support[0]), float(cm.double_support[1]))
+
+    def one(p: Array, i: Array) -> tuple[Array, Array, Array, Array]:
+        return plant_feet(
+            cm.legs,
+            start,
+            last,
+            p,
+            state.tau[i],
+            state.height[i],
+            state.pin[i],
+            state.planted[i],
+            state.pin_toe[i],
+        )
+
+    out, pin, on, toe = jax.vmap(one)(pts, ids)
+    return out, (pin, on, toe)
 
 
 def _move_roots(

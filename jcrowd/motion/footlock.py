@@ -16,9 +16,10 @@ from __future__ import annotations
 import numpy as np
 
 from jcrowd.motion.clip import Motion, joint_positions
-from jcrowd.motion.gait import foot_contacts
+from jcrowd.motion.gait import contacts_from_positions
+from jcrowd.motion.skeleton import Skeleton
 
-__all__ = ["lock_feet", "planted_slides"]
+__all__ = ["lock_feet", "planted_slides", "slides_of_points"]
 
 
 def planted_slides(motion: Motion) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -29,8 +30,15 @@ def planted_slides(motion: Motion) -> list[tuple[np.ndarray, np.ndarray]]:
     and the ``[x, z]`` step (m) from ``i`` to ``i + 1`` of its planted joint, the lower of its
     ankle and toe at frame ``i`` (heel down, then toe down).
     """
-    contacts = foot_contacts(motion)
     pos = np.asarray(joint_positions(motion), np.float64)
+    return slides_of_points(pos, motion.skeleton, motion.fps)
+
+
+def slides_of_points(
+    pos: np.ndarray, skeleton: Skeleton, fps: float
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`planted_slides` of joint positions ``(F, J, 3)`` of ``skeleton`` at ``fps``."""
+    contacts = contacts_from_positions(pos, skeleton, fps)
     out = []
     for flags, ankle, toe in (
         (contacts.left, contacts.feet.left_ankle, contacts.feet.left_toe),

@@ -45,6 +45,7 @@ __all__ = [
     "FootJoints",
     "GaitCycle",
     "character_height",
+    "contacts_from_positions",
     "find_feet",
     "foot_contacts",
     "gait_cycles",
@@ -220,34 +221,47 @@ def _clean(flags: np.ndarray, min_len: int, min_gap: int) -> np.ndarray:
 
 def foot_contacts(motion: Motion, thresholds: ContactThresholds | None = None) -> FootContacts:
     """Contact flags of both feet per frame (see the module docstring for the rule)."""
-    t = thresholds or ContactThresholds()
-    floor_window_s = 1.6
     if motion.num_frames < 3:
         raise MotionError(f"foot contacts: expected at least 3 frames, found {motion.num_frames}")
-    feet = find_feet(motion.skeleton)
-    scale = character_height(motion.skeleton) / REFERENCE_HEIGHT
     pos = np.asarray(joint_positions(motion), np.float64)
+    return contacts_from_positions(pos, motion.skeleton, motion.fps, thresholds)
+
+
+def contacts_from_positions(
+    pos: np.ndarray,
+    skeleton: Skeleton,
+    fps: float,
+    thresholds: ContactThresholds | None = None,
+) -> FootContacts:
+    """:func:`foot_contacts` of joint positions ``(F, J, 3)`` (metres) of ``skeleton`` at
+    ``fps``: for motion given as points, such as what the crowd step draws."""
+    if pos.shape[0] < 3:
+        raise MotionError(f"foot contacts: expected at least 3 frames, found {pos.shape[0]}")
+    t = thresholds or ContactThresholds()
+    floor_window_s = 1.6
+    feet = find_feet(skeleton)
+    scale = character_height(skeleton) / REFERENCE_HEIGHT
     if not np.all(np.isfinite(pos)):
         raise MotionError("foot contacts: the clip has non-finite joint positions")
     # A moving average over ~1/30 s takes the capture's marker jitter out of the speeds.
-    win = max(1, round(motion.fps / 30.0))
+    win = max(1, round(fps / 30.0))
     kernel = np.ones(win) / win
     flags = []
     for ankle, toe in ((feet.left_ankle, feet.left_toe), (feet.right_ankle, feet.right_toe)):
         joint_flags = []
         for j in {ankle, toe}:
             p = pos[:, j]
-            h = p[:, 1] - _local_floor(p[:, 1], round(floor_window_s * motion.fps))
+            h = p[:, 1] - _local_floor(p[:, 1], round(floor_window_s * fps))
             xz = np.stack([np.convolve(p[:, k], kernel, mode="same") for k in (0, 2)], axis=-1)
             xz[: win // 2 + 1] = p[: win // 2 + 1][:, [0, 2]]
             xz[-(win // 2 + 1) :] = p[-(win // 2 + 1) :][:, [0, 2]]
-            v = np.linalg.norm(np.gradient(xz, axis=0), axis=-1) * motion.fps
+            v = np.linalg.norm(np.gradient(xz, axis=0), axis=-1) * fps
             joint_flags.append(_hysteresis(h, v, t, scale))
         flags.append(np.logical_or.reduce(joint_flags))
-    min_len = max(1, round(t.min_contact_s * motion.fps))
-    min_gap = max(1, round(t.min_gap_s * motion.fps))
+    min_len = max(1, round(t.min_contact_s * fps))
+    min_gap = max(1, round(t.min_gap_s * fps))
     left, right = (_clean(f, min_len, min_gap) for f in flags)
-    return FootContacts(left, right, feet, first_strike=max(2, round(0.05 * motion.fps)))
+    return FootContacts(left, right, feet, first_strike=max(2, round(0.05 * fps)))
 
 
 def gait_cycles(

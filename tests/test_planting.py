@@ -1,0 +1,143 @@
+"""Planted feet (jcrowd.crowd.planting): the two-bone solution against its closed form, a
+planted foot held still while the decoded one slides, its release eased, and the transforms."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jcrowd.crowd.planting import (
+    MAX_SLIP,
+    RELEASE_SHARE,
+    STANCE_SHARE,
+    leg_chains,
+    plant_feet,
+    plant_sequence,
+    reach,
+)
+
+# A toy skeleton's points: root 0; left hip 1, knee 2, ankle 3, toe 4; right 5–8; the toes' End
+# Sites 9 and 10 (children of the toes).
+PARENTS = (-1, 0, 1, 2, 3, 0, 5, 6, 7, 4, 8)
+FEET = (3, 4, 7, 8)
+LAST = 99.0
+START = (0.0, 49.5)
+
+
+def _leg(rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+    hip = rng.normal(size=3)
+    knee = hip + np.array([0.0, -0.45, 0.0]) + rng.normal(scale=0.08, size=3)
+    ankle = knee + np.array([0.0, -0.42, 0.0]) + rng.normal(scale=0.08, size=3)
+    toe = ankle + np.array([0.0, -0.05, 0.14])
+    return hip, knee, ankle, toe
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.floats(-0.25, 0.25), st.floats(-0.25, 0.25))
+def test_reach_keeps_bones_and_hits_reachable_targets(seed, dx, dz):
+    """Thigh and shin keep their lengths; a target within reach is met; one beyond is met at
+    full reach along the hip–target line (closed form)."""
+    hip, knee, ankle, toe = _leg(np.random.default_rng(seed))
+    target = ankle + np.array([dx, 0.0, dz])
+    k, a = (
+        np.asarray(v, np.float64) for v in reach(*map(jnp.asarray, (hip, knee, ankle, toe, target)))
+    )
+    l1, l2 = np.linalg.norm(knee - hip), np.linalg.norm(ankle - knee)
+    np.testing.assert_allclose(np.linalg.norm(k - hip), l1, atol=1e-5)
+    np.testing.assert_allclose(np.linalg.norm(a - k), l2, atol=1e-5)
+    d = np.linalg.norm(target - hip)
+    if abs(l1 - l2) + 1e-4 < d < l1 + l2 - 1e-4:
+        np.testing.assert_allclose(a, target, atol=1e-5)
+    elif d >= l1 + l2:
+        np.testing.assert_allclose(a, hip + (l1 + l2) * (target - hip) / d, atol=1e-4)
+
+
+def test_reach_at_the_decoded_ankle_keeps_a_bent_knee():
+    """Asked for the ankle where it is, a bent leg comes back unchanged."""
+    hip, knee, ankle = (
+        np.array([0.0, 1.0, 0.0]),
+        np.array([0.0, 0.55, 0.1]),
+        np.array([0, 0.1, 0.0]),
+    )
+    toe = ankle + np.array([0.0, 0.0, 0.14])
+    k, a = reach(*map(jnp.asarray, (hip, knee, ankle, toe, ankle)))
+    np.testing.assert_allclose(k, knee, atol=1e-5)
+    np.testing.assert_allclose(a, ankle, atol=1e-5)
+
+
+def test_reach_bends_the_knee_forward_not_back():
+    """The ankle pulled in under the hip bends the knee to the side it was bent to."""
+    hip, knee, ankle = (
+        np.array([0.0, 1.0, 0.0]),
+        np.array([0.0, 0.55, 0.02]),
+        np.array([0, 0.1, 0.0]),
+    )
+    toe = ankle + np.array([0.0, 0.0, 0.14])
+    k, _ = reach(*map(jnp.asarray, (hip, knee, ankle, toe, ankle + np.array([0.0, 0.1, 0.0]))))
+    assert float(k[2]) > 0.05
+
+
+def _walker(frames: int, slide: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points of a toy walker standing still whose left ankle and toe slide along +x by
+    ``slide`` m per frame (a decoded foot sliding in stance), and its phases (a cycle over
+    ``frames`` frames, the left stance from phase 0)."""
+    p = np.zeros((len(PARENTS), 3))
+    p[1], p[2], p[3], p[4] = [0.1, 1.0, 0], [0.1, 0.55, 0.08], [0.1, 0.1, 0], [0.1, 0.05, 0.14]
+    p[5:9] = p[1:5] * [-1, 1, 1]
+    p[9], p[10] = p[4] + [0, 0, 0.05], p[8] + [0, 0, 0.05]
+    pts = np.repeat(p[None], frames, axis=0)
+    move = np.arange(frames)[:, None] * slide
+    for j in (3, 4, 9):
+        pts[:, j, 0] += move[:, 0]
+    tau = np.arange(frames) * LAST / frames
+    return pts.astype(np.float32), tau.astype(np.float32)
+
+
+def test_a_planted_foot_stays_and_lets_go_smoothly():
+    """Over its stance the left toe (the planted joint: lower than the ankle) does not move
+    while the decoded foot slides; after the stance the offset eases out over the swing's
+    first part, continuous at the release (no step larger than the decoded slide plus the
+    eased offset's largest per-frame change, 1.5 offset ÷ frames of the ease)."""
+    legs = leg_chains(PARENTS, FEET)
+    frames, slide = 100, 0.001
+    pts, tau = _walker(frames, slide)
+    out = np.asarray(plant_sequence(legs, START, LAST, jnp.asarray(pts), jnp.asarray(tau), 1.0))
+    stance = int(STANCE_SHARE * frames)  # frames 0 .. stance − 1 planted
+    toe = out[:stance, 4, [0, 2]]
+    np.testing.assert_allclose(toe, np.repeat(toe[:1], stance, axis=0), atol=1e-5)
+    held = slide * stance  # the offset let go of at the release frame
+    assert held < MAX_SLIP
+    ease = RELEASE_SHARE * (frames - stance)
+    steps = np.linalg.norm(np.diff(out[stance - 1 :, 4, [0, 2]], axis=0), axis=1)
+    assert steps[0] <= slide + 1e-5  # continuous at the release itself
+    assert steps.max() <= slide + 1.5 * held / ease + 1e-5
+    # Eased out: past the release the foot is back on its decoded path.
+    np.testing.assert_allclose(out[-5:, 4], pts[-5:, 4], atol=1e-6)
+    # The right foot's decoded points do not move, and planted they stay where they are.
+    np.testing.assert_allclose(out[:, 5:9], pts[:, 5:9], atol=1e-5)
+
+
+def test_planting_transforms():
+    """jit == eager, and vmap over agents == a loop."""
+    legs = leg_chains(PARENTS, FEET)
+    pts, tau = _walker(40, 0.002)
+    args = (jnp.asarray(pts), jnp.asarray(tau), jnp.float32(1.0))
+    eager = plant_sequence(legs, START, LAST, *args)
+    jitted = jax.jit(lambda p, t, s: plant_sequence(legs, START, LAST, p, t, s))(*args)
+    np.testing.assert_allclose(eager, jitted, atol=1e-6)
+    pins = jnp.asarray(np.random.default_rng(0).normal(scale=0.02, size=(3, 2, 2)), jnp.float32)
+    on = jnp.array([[True, False], [False, False], [True, True]])
+    many = jnp.stack([args[0][5], args[0][20], args[0][30]])
+    phases = jnp.array([5.0, 40.0, 70.0])
+
+    def one(p, t, pin, o):
+        return plant_feet(legs, START, LAST, p, t, jnp.float32(1.0), pin, o, o)
+
+    batched = jax.vmap(one)(many, phases, pins, on)
+    for i in range(3):
+        single = one(many[i], phases[i], pins[i], on[i])
+        for b, s in zip(batched, single, strict=True):
+            np.testing.assert_allclose(b[i], s, atol=1e-6)
