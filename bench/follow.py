@@ -14,7 +14,7 @@ recording (skate and pops over each agent slot's first life, :func:`alive_span`)
   ``SLOW_M_S``: a standing person's velocity has no direction.
 - ``skate_cm_per_frame``: every agent re-synthesized at level 0 over its time in the scene with
   the root where the run put it (:func:`jcrowd.crowd.agent_motion`), its feet planted as the
-  step plants a near agent's (:func:`jcrowd.crowd.planting.plant_sequence`, where the scene's
+  step plants a near agent's (:func:`jcrowd.motion.planting.plant_sequence`, where the scene's
   dynamics and foot lock are on), foot skate as :func:`jcrowd.model.foot_skate`
   (``bench/skate.py``'s measure) on those joints; ``skate_captures_cm_per_frame`` the same on
   the ``cmu16`` captures (the default model's data, 30 fps), ``skate_ratio`` the two;
@@ -69,7 +69,8 @@ recording (skate and pops over each agent slot's first life, :func:`alive_span`)
   smooth heading, so that bar measures how much the crowd sidesteps as well as how the walkers
   follow.
 
-``python bench/follow.py [--json] [--no-record] [--plant-feet]``; appends a row to bench/RESULTS.md.
+``python bench/follow.py [--json] [--no-record] [--no-plant-feet]``; appends a row to
+bench/RESULTS.md.
 """
 
 from __future__ import annotations
@@ -88,7 +89,7 @@ from jcrowd import load_default_model
 from jcrowd.cli.run import simulate
 from jcrowd.crowd import prepare
 from jcrowd.crowd.level_blend import BLEND_SECONDS
-from jcrowd.crowd.planting import plant_sequence
+from jcrowd.motion.planting import plant_sequence
 from jcrowd.io import load_dataset
 from jcrowd.model import agent_motion, foot_skate
 from jcrowd.motion.clip import joint_positions
@@ -141,16 +142,16 @@ def alive_span(alive: np.ndarray) -> tuple[int, int] | None:
 
 
 def level0_joints(model, rec: dict, agent: int, span: tuple[int, int], cm=None):
-    """The agent re-synthesized at level 0 over ``span``: its Motion and joints ``(F, J, 3)``,
-    the joints with the feet planted as the step plants a near agent's
-    (:func:`jcrowd.crowd.planting.plant_sequence`) when ``cm`` (the crowd model) is given."""
+    """The agent re-synthesized at level 0 over ``span``: its Motion, its joints ``(F, J, 3)``
+    and, when ``cm`` (the crowd model) is given, those joints with the feet planted as the step
+    plants a near agent's (:func:`jcrowd.motion.planting.plant_sequence`; else ``None``)."""
     a, b = span
     sub = {k: rec[k][a:b] for k in PER_FRAME}
     sub["height"], sub["fps"] = rec["height"], rec["fps"]
     motion = agent_motion(model, sub, agent)
     joints = np.asarray(joint_positions(motion))
     if cm is None or not cm.legs:
-        return motion, joints
+        return motion, joints, None
     j = joints.shape[1]
     size = max(max(leg[4]) for leg in cm.legs) + 1  # the legs' End Sites follow the joints
     pts = np.concatenate([joints, np.zeros((len(joints), max(size - j, 0), 3), joints.dtype)], 1)
@@ -163,11 +164,12 @@ def level0_joints(model, rec: dict, agent: int, span: tuple[int, int], cm=None):
         jnp.asarray(sub["tau"][:, agent], jnp.float32),
         jnp.float32(scale),
     )
-    return motion, np.asarray(planted)[:, :j]
+    return motion, joints, np.asarray(planted)[:, :j]
 
 
-PLANT = False
-"""``--plant-feet``: the scenes run with :attr:`~jcrowd.crowd.state.StepConfig.plant_feet`."""
+NO_PLANT = False
+"""``--no-plant-feet``: the scenes run without planted feet
+(:attr:`~jcrowd.crowd.state.StepConfig.plant_feet` off)."""
 
 LEVEL0_RUN = 30
 """Frames: a drawn level-0 stretch this long or longer counts towards the drawn skate."""
@@ -313,12 +315,13 @@ def standing_facing(ang, pos, alive, fps) -> np.ndarray:
     return np.concatenate(out) if out else np.zeros(0)
 
 
-def pixel_jumps(own, ref, view_ids, views) -> np.ndarray:
+def pixel_jumps(own, r0, r1, view_ids, views) -> np.ndarray:
     """``max_j |Δq_j − Δq⁰_j|`` in pixels per frame step: the drawn joints ``own (F, J, 3)``
-    and the level-0 ones ``ref`` projected with the view of the step's later frame
+    and the level-0 ones of each step ``r0, r1 (F − 1, J, 3)`` (the earlier and the later
+    frame's), projected with the view of the step's later frame
     (``views[view_ids[f]]``; one projection per distinct view: a fixed camera projects every
     frame at once)."""
-    pairs = np.stack([own[:-1], own[1:], ref[:-1], ref[1:]], axis=1)  # (F−1, 4, J, 3)
+    pairs = np.stack([own[:-1], own[1:], r0, r1], axis=1)  # (F−1, 4, J, 3)
     out = np.full(len(own) - 1, np.nan)
     later = view_ids[1:]
     for k in np.unique(later):
@@ -331,8 +334,8 @@ def pixel_jumps(own, ref, view_ids, views) -> np.ndarray:
 
 def measure(model, name: str, steps: int | None) -> dict:
     sim, state = prepare(load_scenario(Path(ROOT) / "examples" / f"{name}.toml"), model)
-    if PLANT:
-        sim = dataclasses.replace(sim, config=dataclasses.replace(sim.config, plant_feet=True))
+    if NO_PLANT:
+        sim = dataclasses.replace(sim, config=dataclasses.replace(sim.config, plant_feet=False))
     seconds = min(sim.scenario.duration_s, WINDOW_S.get(name, np.inf))
     steps = steps or round(seconds * sim.scenario.fps)
     _, rec = simulate(sim, state, steps, "all")
@@ -397,13 +400,16 @@ def measure(model, name: str, steps: int | None) -> dict:
     ]
     view_ids = view_ids.reshape(-1)
     # The step plants near agents' feet with the dynamics on; the level-0 walker is planted alike.
-    planting = sim.crowd if PLANT and sim.config.avoid and sim.config.foot_lock else None
+    config = sim.config
+    planting = sim.crowd if config.avoid and config.foot_lock and config.plant_feet else None
+    near_max = config.blend_max_level
     ease = int(np.ceil(BLEND_SECONDS * fps)) + 1  # frames a level change moves the pose over
     for agent in range(n):
         span = alive_span(alive[:, agent])
         if span is None:
             continue
-        _, ref = level0_joints(model, rec, agent, span, planting)
+        _, loose, planted = level0_joints(model, rec, agent, span, planting)
+        ref = loose if planted is None else planted  # a near agent's, as the step draws it
         scale = float(rec["height"][agent]) / model.body_height
         slid = slides_of_points(ref.astype(np.float64), model.skeleton.scaled(scale), fps)
         every = np.concatenate([np.linalg.norm(step, axis=1) for _, step in slid])
@@ -412,8 +418,15 @@ def measure(model, name: str, steps: int | None) -> dict:
         own = pts[a:b, agent, :j]
         lv = level[a:b, agent]
         move = np.diff(own, axis=0)
-        extra = np.linalg.norm(move - np.diff(ref, axis=0), axis=-1).max(axis=1)
-        extra_px = np.where(np.isfinite(extra), pixel_jumps(own, ref, view_ids[a:b], views), np.nan)
+        # Each frame step is compared with the level-0 walker drawn as this one is: planted
+        # where both frames are at a near level (when the step plants), else not.
+        both_near = ((lv[1:] <= near_max) & (lv[:-1] <= near_max))[:, None, None]
+        r0 = np.where(both_near, ref[:-1], loose[:-1])
+        r1 = np.where(both_near, ref[1:], loose[1:])
+        extra = np.linalg.norm(move - (r1 - r0), axis=-1).max(axis=1)
+        extra_px = np.where(
+            np.isfinite(extra), pixel_jumps(own, r0, r1, view_ids[a:b], views), np.nan
+        )
         raw = np.linalg.norm(move, axis=-1).max(axis=1)
         change = (lv[1:] != lv[:-1]) & (lv[1:] < nlev) & (lv[:-1] < nlev)
         normal = np.nanmedian(raw) if np.isfinite(raw).any() else np.nan
@@ -489,10 +502,10 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=0, help="steps per scene (0: its duration)")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--no-record", action="store_true")
-    ap.add_argument("--plant-feet", action="store_true", help="plant near agents' feet")
+    ap.add_argument("--no-plant-feet", action="store_true", help="near agents' feet unplanted")
     args = ap.parse_args()
-    global PLANT
-    PLANT = args.plant_feet
+    global NO_PLANT
+    NO_PLANT = args.no_plant_feet
     model = load_default_model()
     captures = [100 * foot_skate(c.motion) for c in load_dataset(data_root() / "cmu16")]
     ref = float(np.mean(captures))
@@ -549,7 +562,8 @@ def main() -> None:
                 f"| {who} | {m['moving_share']} | {m['away_over_60_share']} / "
                 f"{m['away_over_90_share']} | {m['smooth_heading_p99_deg']} |\n"
             )
-    details = f"{out['machine']}, jax {out['jax']}"
+    feet = "feet unplanted" if NO_PLANT else "feet planted"
+    details = f"{out['machine']}, jax {out['jax']}, {feet}"
     report("follow", details, out, text, args.json, not args.no_record)
 
 

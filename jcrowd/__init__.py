@@ -14,7 +14,7 @@ from jcrowd.io.bvh import load_bvh as load_bvh
 from jcrowd.io.bvh import read_bvh as read_bvh
 from jcrowd.io.bvh_write import write_bvh as write_bvh
 from jcrowd.io.dataset import load_dataset as load_dataset
-from jcrowd.io.resources import load_default_model as load_default_model
+from jcrowd.io.model_file import load_default_model as load_default_model
 from jcrowd.motion.clip import Clip as Clip
 from jcrowd.motion.clip import Motion as Motion
 from jcrowd.motion.gait import GaitCycle as GaitCycle

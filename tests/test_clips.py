@@ -96,5 +96,6 @@ def test_next_clips_lod_beyond_the_budget_waits(cm):
     c_all, a_all, _, done_all = lod(cm, *args, 0.5, jnp.ones(6, bool), 6)
     c, a, _ = next_clips(cm, *args, 0.5)
     assert np.asarray(done_all).all()
-    np.testing.assert_allclose(np.asarray(c_all), np.asarray(c), atol=1e-6)
-    np.testing.assert_allclose(np.asarray(a_all), np.asarray(a), atol=1e-6)
+    # Jitted and eager float32 solves differ in rounding: up to ~1e-6 in a weight of ~3e-3.
+    np.testing.assert_allclose(np.asarray(c_all), np.asarray(c), atol=1e-5)
+    np.testing.assert_allclose(np.asarray(a_all), np.asarray(a), atol=1e-5)

@@ -145,7 +145,8 @@ def test_reliability_falls_with_distance(fitted):
     assert rho[0] == pytest.approx(1.0, abs=1e-4)
     assert rho[-1] == pytest.approx(0.0, abs=1e-5)
     outside = np.linalg.norm(ray - c.mean(0), axis=1) > 12  # beyond every sample
-    assert np.all(np.diff(rho[outside]) <= 1e-6)
+    # Far out 1 - variance / sill is float32 rounding (~5e-6), the same tolerance as rho[-1].
+    assert np.all(np.diff(rho[outside]) <= 1e-5)
 
 
 def test_variances_relation(fitted):

@@ -1,4 +1,4 @@
-"""Planted feet (jcrowd.crowd.planting): the two-bone solution against its closed form, a
+"""Planted feet (jcrowd.motion.planting): the two-bone solution against its closed form, a
 planted foot held still while the decoded one slides, its release eased, and the transforms."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jcrowd.crowd.planting import (
+from jcrowd.motion.planting import (
     MAX_SLIP,
     RELEASE_SHARE,
     STANCE_SHARE,
@@ -121,13 +121,23 @@ def test_a_planted_foot_stays_and_lets_go_smoothly():
 
 
 def test_planting_transforms():
-    """jit == eager, and vmap over agents == a loop."""
+    """The scanned sequence == the per-frame step in a Python loop, eager; jit == eager for
+    one frame; and vmap over agents == a loop."""
     legs = leg_chains(PARENTS, FEET)
     pts, tau = _walker(40, 0.002)
     args = (jnp.asarray(pts), jnp.asarray(tau), jnp.float32(1.0))
-    eager = plant_sequence(legs, START, LAST, *args)
-    jitted = jax.jit(lambda p, t, s: plant_sequence(legs, START, LAST, p, t, s))(*args)
-    np.testing.assert_allclose(eager, jitted, atol=1e-6)
+    scanned = plant_sequence(legs, START, LAST, *args)
+    carry = (jnp.zeros((2, 2)), jnp.zeros(2, bool), jnp.zeros(2, bool))
+    for f in range(len(pts)):
+        with jax.disable_jit():
+            out, *rest = plant_feet(legs, START, LAST, args[0][f], args[1][f], 1.0, *carry)
+        carry = tuple(rest)
+        np.testing.assert_allclose(scanned[f], out, atol=1e-6)
+    jitted = jax.jit(lambda p, t, *c: plant_feet(legs, START, LAST, p, t, 1.0, *c))
+    with jax.disable_jit():
+        eager = plant_feet(legs, START, LAST, args[0][7], args[1][7], 1.0, *carry)
+    for a, b in zip(jitted(args[0][7], args[1][7], *carry), eager, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-6)
     pins = jnp.asarray(np.random.default_rng(0).normal(scale=0.02, size=(3, 2, 2)), jnp.float32)
     on = jnp.array([[True, False], [False, False], [True, True]])
     many = jnp.stack([args[0][5], args[0][20], args[0][30]])
@@ -141,3 +151,60 @@ def test_planting_transforms():
         single = one(many[i], phases[i], pins[i], on[i])
         for b, s in zip(batched, single, strict=True):
             np.testing.assert_allclose(b[i], s, atol=1e-6)
+
+
+def _straight_walk(model, frames: int = 90) -> dict:
+    """A recording (``--record all`` keys) of one agent walking straight along +z at the
+    model's mean controls, its phase advancing a cycle per second."""
+    c = np.asarray(model.levels[0].kriging.controls, np.float32).mean(axis=0)
+    last = model.levels[0].u_time.shape[0] - 1
+    t = np.arange(frames)
+    return {
+        "position": np.stack([np.zeros(frames), 1.2 * t / 30.0], axis=1)[:, None].astype(
+            np.float32
+        ),
+        "heading": np.zeros((frames, 1), np.float32),
+        "tau": (np.remainder(t * last / 30.0, last)[:, None]).astype(np.float32),
+        "control": np.repeat(c[None, None], frames, axis=0),
+        "control_next": np.repeat(c[None, None], frames, axis=0),
+        "has_next": np.zeros((frames, 1), bool),
+        "height": np.array([1.75], np.float32),
+        "fps": np.float32(30.0),
+    }
+
+
+def test_a_planted_clip_puts_the_legs_where_the_points_were_planted():
+    """``agent_motion(plant=True)`` writes the planting as joint rotations: its forward
+    kinematics equal the planted points (oracle: :func:`plant_sequence` on the unplanted clip's
+    joints) to 0.1 mm, the root and the upper body untouched, and its feet slide less. The
+    heel strikes it plants by are the crowd step's double-support phases."""
+    from jcrowd import load_default_model
+    from jcrowd.crowd.clips import build_crowd_model
+    from jcrowd.model import agent_motion, foot_skate
+    from jcrowd.model.resynthesis import heel_strikes
+    from jcrowd.motion.clip import joint_positions
+    from jcrowd.motion.gait import find_feet
+
+    model = load_default_model()
+    strikes = heel_strikes(model)
+    assert strikes == build_crowd_model(model).double_support
+    rec = _straight_walk(model)
+    loose = agent_motion(model, rec, 0)
+    planted = agent_motion(model, rec, 0, plant=True)
+    before = np.asarray(joint_positions(loose))
+    f = find_feet(model.skeleton)
+    legs = leg_chains(
+        model.skeleton.parents, (f.left_ankle, f.left_toe, f.right_ankle, f.right_toe)
+    )
+    scale = 1.75 / model.body_height
+    last = float(model.levels[0].u_time.shape[0] - 1)
+    want = plant_sequence(
+        legs, strikes, last, jnp.asarray(before), jnp.asarray(rec["tau"][:, 0]), scale
+    )
+    got = np.asarray(joint_positions(planted))
+    np.testing.assert_allclose(got, np.asarray(want), atol=1e-4)
+    assert np.abs(got - before).max() > 0.005  # premise: the planting moved the legs
+    moved = sorted({j for leg in legs for j in (leg[1], *leg[4])})
+    still = [j for j in range(got.shape[1]) if j not in moved]
+    np.testing.assert_allclose(got[:, still], before[:, still], atol=1e-5)
+    assert foot_skate(planted) < 0.5 * foot_skate(loose)

@@ -34,7 +34,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from jcrowd.cli.output import emit
     from jcrowd.cli.render import parse_size, render_scenario
     from jcrowd.errors import JcrowdError
-    from jcrowd.io.resources import demo_scenario_path, load_default_model
+    from jcrowd.io.model_file import load_default_model
+    from jcrowd.io.resources import demo_scenario_path
     from jcrowd.scenario.parse import load_scenario
 
     if not args.seconds > 0:

@@ -1,7 +1,8 @@
 """``jcrowd export RUN.npz``: agents of a recorded run as BVH files, or the whole crowd as one glTF.
 
 The run must be recorded with ``jcrowd run --record all``. Each chosen agent is re-synthesized
-at full detail from its recorded clips and phases (:func:`jcrowd.model.resynthesis.agent_motion`).
+at full detail from its recorded clips and phases (:func:`jcrowd.model.resynthesis.agent_motion`),
+its feet planted when the run planted near agents' feet (the recording's ``planted``).
 
 - ``--format bvh`` (default): ``--agent ID [ID ...] --out-dir DIR`` writes ``DIR/agent_ID.bvh``
   (metres, the run's frame rate, every joint of the model's skeleton), which Blender and
@@ -84,6 +85,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     return result
 
 
+def _planted(rec: dict) -> bool:
+    """Whether the run planted near agents' feet (recordings from before it could: no)."""
+    return bool(rec["planted"]) if "planted" in rec else False
+
+
 def _bvh(args: argparse.Namespace, rec: dict, model: Any) -> dict[str, Any]:
     from jcrowd.io.bvh_write import write_bvh
     from jcrowd.model.resynthesis import agent_motion
@@ -92,7 +98,7 @@ def _bvh(args: argparse.Namespace, rec: dict, model: Any) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     files, frames = [], 0
     for agent in args.agent:
-        motion = agent_motion(model, rec, agent)
+        motion = agent_motion(model, rec, agent, _planted(rec))
         path = out / f"agent_{agent}.bvh"
         write_bvh(path, motion)
         files.append(str(path))
@@ -137,7 +143,8 @@ def _glb(args: argparse.Namespace, rec: dict, model: Any) -> dict[str, Any]:
     with Progress(console=Console(file=sys.stderr), transient=True) as bar:
         task = bar.add_task(f"re-synthesizing {len(ids)} agents", total=len(ids))
         for a in ids:
-            motion = slice_frames(agent_motion(model, rec, a), span.start, span.stop)
+            motion = agent_motion(model, rec, a, _planted(rec))
+            motion = slice_frames(motion, span.start, span.stop)
             scale = float(rec["height"][a]) / model.body_height  # stature → skeleton scale
             agents.append(CrowdAgent(motion, scale, alive_all[span, a], tints[a]))
             bar.advance(task)

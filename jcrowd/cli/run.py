@@ -320,8 +320,10 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
 
 def _run_constants(sim: Any, nlev: int) -> dict[str, np.ndarray]:
     """What a recording holds once: agents' heights, groups and colours, the rate, the lens,
-    the level count and, with a layout, the obstacles' prisms (drawn by ``jcrowd render``)."""
+    the level count, whether near agents' feet were planted (``planted``: ``jcrowd export``
+    plants them alike) and, with a layout, the obstacles' prisms (drawn by ``jcrowd render``)."""
     from jcrowd.cli.runloop import scenario_obstacles
+    from jcrowd.crowd.stepping import plants_feet
 
     cam = sim.scenario.camera
     out = {
@@ -331,6 +333,7 @@ def _run_constants(sim: Any, nlev: int) -> dict[str, np.ndarray]:
         "fps": np.asarray(sim.scenario.fps),
         "lens": np.asarray([cam.fov_deg, cam.near, cam.far], np.float64),
         "levels": np.asarray(nlev),
+        "planted": np.asarray(plants_feet(sim.crowd, sim.config)),
     }
     if not sim.scenario.layout.empty:
         out["obstacles"] = scenario_obstacles(sim.scenario)

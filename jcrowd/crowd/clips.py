@@ -37,7 +37,6 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from jcrowd.crowd.planting import Legs, leg_chains
 from jcrowd.crowd.synthesis import (
     Decoders,
     build_decoders,
@@ -53,6 +52,7 @@ from jcrowd.kriging.universal import reliability_one, weights_and_reliability
 from jcrowd.model.motion_model import MotionModel
 from jcrowd.motion.fastmath import sincos
 from jcrowd.motion.gait import find_feet
+from jcrowd.motion.planting import Legs, leg_chains
 
 __all__ = [
     "CrowdModel",
@@ -85,7 +85,7 @@ class CrowdModel(eqx.Module):
             (:attr:`~jcrowd.model.motion_model.MotionModel.body_height`): an agent's stature
             is its skeleton scale ``state.height`` times this.
         legs: per foot the hip, knee, ankle and toe points and the ankle's descendants
-            (:func:`jcrowd.crowd.planting.leg_chains`, for planting the feet).
+            (:func:`jcrowd.motion.planting.leg_chains`, for planting the feet).
     """
 
     decoders: Decoders

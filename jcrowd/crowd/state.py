@@ -46,11 +46,9 @@ class StepConfig:
         min_reliability: below this ρ the next clip is averaged with the nearest sample's clip.
         foot_lock: near levels (≤ ``blend_max_level``) keep the stance foot from sliding:
             without the dynamics by moving the root (the lowest foot joint stays put), with
-            them only with ``plant_feet``.
+            them by planting the feet (``plant_feet``).
         plant_feet: with the dynamics and ``foot_lock``, near agents' stance feet are planted
-            and their legs bent to reach them (:mod:`jcrowd.crowd.planting`). Off by default:
-            a foot held off its decoded place snaps back when its agent leaves the near levels,
-            and a walker slowing to stand builds up offsets of up to ``MAX_SLIP``.
+            and their legs bent to reach them (:mod:`jcrowd.motion.planting`).
         min_pixels: agents whose projected height is below this are not synthesized (root
             only, drawn as dots); 0 synthesizes every agent in the frustum.
         chunk: a level's bucket is decoded in chunks of at least this many slots (at most 8
@@ -84,7 +82,7 @@ class StepConfig:
     importance: str = "distance"
     min_reliability: float = 0.5
     foot_lock: bool = True
-    plant_feet: bool = False
+    plant_feet: bool = True
     min_pixels: float = 3.0
     chunk: int = 64
     krige_budget: int = 0
@@ -183,7 +181,7 @@ class CrowdState(eqx.Module):
     shown: Int[Array, " N"]
     blend_from: Int[Array, " N"]
     blend_left: Float[Array, " N"]
-    # With the dynamics on, near agents' planted feet (jcrowd.crowd.planting): per foot the pin
+    # With the dynamics on, near agents' planted feet (jcrowd.motion.planting): per foot the pin
     # (x, z; the release offset while it swings), planted in the last frame, pinned by the toe.
     pin: Float[Array, "N 2 2"]
     planted: Bool[Array, "N 2"]

@@ -53,13 +53,13 @@ from jcrowd.crowd.lod import (
     in_frustum,
     screen_height_px,
 )
-from jcrowd.crowd.planting import plant_feet
 from jcrowd.crowd.pool import Pool, spawn_due
 from jcrowd.crowd.schedule import schedule
 from jcrowd.crowd.state import CrowdState, Frame, StepConfig, refresh_far_cores
 from jcrowd.crowd.steering import walk
 from jcrowd.crowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
 from jcrowd.motion.fastmath import sincos
+from jcrowd.motion.planting import plant_feet
 from jcrowd.pedestrians.heading import smoothstep
 from jcrowd.pedestrians.world import World
 
@@ -67,6 +67,7 @@ __all__ = [
     "bucket_chunk",
     "decode_bucket",
     "default_capacities",
+    "plants_feet",
     "step",
 ]
 
@@ -261,6 +262,7 @@ class _Blending(eqx.Module):
     source: Array
     left: Array
     unblended: Array
+    feet: tuple[Array, Array, Array]  # the pins of agents blending from a near level (planting)
 
 
 def _blending(
@@ -272,7 +274,10 @@ def _blending(
         state.shown, state.blend_from, state.blend_left, buckets.level, state.alive, nlev
     )
 
+    feet = _no_pins(state)
+
     def old_pose(a: int, ids: Array, used: Array) -> Array:
+        nonlocal feet
         near = a <= config.blend_max_level
         safe = jnp.where(ids < state.num_agents, ids, 0)
 
@@ -280,10 +285,21 @@ def _blending(
             return _agent_level(cm, a, near, False, state, i, dt, follow=config.avoid)[0]
 
         chunk = bucket_chunk(ids.shape[0], config.chunk, cm.decoders.levels[a].cores.shape[1])
-        return decode_bucket(jax.vmap(one), safe, used, chunk)
+        pts = decode_bucket(jax.vmap(one), safe, used, chunk)
+        if near and plants_feet(cm, config):
+            # An agent leaving the near levels eases from its planted feet, not from where they
+            # slid to: its old pose is planted as it was drawn, its pins carried on. (One going
+            # to another near level is planted after the easing, with the same pins.)
+            leaving = buckets.level[safe] > config.blend_max_level
+            planted, new = _plant(cm, state, safe, pts)
+            pts = jnp.where(leaving[:, None, None], planted, pts)
+            to = jnp.where(leaving, ids, state.num_agents)
+            pin, on, toe = (o.at[to].set(v, mode="drop") for o, v in zip(feet, new, strict=True))
+            feet = (pin, on, toe)
+        return pts
 
     rows, unblended = blend_sources(buckets.slots, source, left, old_pose)
-    return _Blending(rows, source, left, unblended)
+    return _Blending(rows, source, left, unblended, feet)
 
 
 def _synthesis(
@@ -292,6 +308,7 @@ def _synthesis(
     state: CrowdState,
     buckets: Buckets,
     blend: BlendRows,
+    feet: tuple[Array, Array, Array],
     dt: Array,
 ) -> tuple[CrowdState, list[Array], tuple[Array, Array, Array, Array]]:
     """Stage 4: per level, decode + forward kinematics of its bucket (eased from the old level
@@ -301,13 +318,10 @@ def _synthesis(
     nlev = len(cm.decoders.levels)
     dtau, dyaw, dx, dz = _dead_reckoning(cm, state, dt, config.avoid)
     points = []
-    # Planted feet (with the dynamics): every agent's pins are rebuilt from the near buckets.
-    plant = config.avoid and config.foot_lock and config.plant_feet and bool(cm.legs)
-    feet_out = [
-        jnp.zeros_like(state.pin),
-        jnp.zeros_like(state.planted),
-        jnp.zeros_like(state.pin_toe),
-    ]
+    # Planted feet (with the dynamics): every agent's pins are rebuilt from the blend rows and
+    # the near buckets; an agent in neither has none.
+    plant = plants_feet(cm, config)
+    feet_out = list(feet)
     for lv, (slots, ok) in enumerate(zip(buckets.slots, buckets.valid, strict=True)):
         safe = jnp.where(ok, slots, 0)
         near = lv <= config.blend_max_level
@@ -344,10 +358,24 @@ def _synthesis(
     return state, points, (dtau, dyaw, dx, dz)
 
 
+def plants_feet(cm: CrowdModel, config: StepConfig) -> bool:
+    """Whether the step plants near agents' feet (:mod:`jcrowd.motion.planting`)."""
+    return config.avoid and config.foot_lock and config.plant_feet and bool(cm.legs)
+
+
+def _no_pins(state: CrowdState) -> tuple[Array, Array, Array]:
+    """Pins, planted and toe flags of nobody planted."""
+    return (
+        jnp.zeros_like(state.pin),
+        jnp.zeros_like(state.planted),
+        jnp.zeros_like(state.pin_toe),
+    )
+
+
 def _plant(
     cm: CrowdModel, state: CrowdState, ids: Array, pts: Array
 ) -> tuple[Array, tuple[Array, Array, Array]]:
-    """A near bucket's points with their stance feet planted (:mod:`jcrowd.crowd.planting`),
+    """A near bucket's points with their stance feet planted (:mod:`jcrowd.motion.planting`),
     and its agents' new pins."""
     last = float(cm.frames - 1)
     start = (float(cm.double_support[0]), float(cm.double_support[1]))
@@ -439,7 +467,7 @@ def step(
         vx, vz, facing, crowding = walk(config, world, state, near, dt, gather, ids)
         state = eqx.tree_at(lambda s: (s.vx, s.vz), state, (vx, vz))
     blending = _blending(cm, config, state, buckets, dt)
-    state, points, motion = _synthesis(cm, config, state, buckets, blending.rows, dt)
+    state, points, motion = _synthesis(cm, config, state, buckets, blending.rows, blending.feet, dt)
     state = _move_roots(cm, config, state, alive, motion, dt, facing)
     state, deferred = schedule(cm, config, state, buckets.level < nlev, world)
     shown = jnp.where(alive, buckets.level, nlev)

@@ -20,7 +20,7 @@ from jcrowd.io.report import summary_text as summary_text
 from jcrowd.io.report import write_fit_report as write_fit_report
 from jcrowd.io.resources import default_model_path as default_model_path
 from jcrowd.io.resources import demo_scenario_path as demo_scenario_path
-from jcrowd.io.resources import load_default_model as load_default_model
+from jcrowd.io.model_file import load_default_model as load_default_model
 from jcrowd.io.resources import sample_bvh_path as sample_bvh_path
 from jcrowd.io.store import FORMAT_VERSION as FORMAT_VERSION
 from jcrowd.io.store import load_store as load_store

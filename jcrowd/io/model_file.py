@@ -17,13 +17,14 @@ import numpy as np
 
 from jcrowd.errors import StoreError
 from jcrowd.io.body_file import with_body_height
+from jcrowd.io.resources import default_model_path
 from jcrowd.io.store import load_store, save_store, skeleton_from_json, skeleton_to_json
 from jcrowd.kriging.universal import KrigingModel
 from jcrowd.kriging.variogram_fit import VariogramFit
 from jcrowd.model.motion_model import MotionLevel, MotionModel
 from jcrowd.model.posevec import PoseLayout
 
-__all__ = ["KIND", "load_motion_model", "save_motion_model"]
+__all__ = ["KIND", "load_default_model", "load_motion_model", "save_motion_model"]
 
 KIND = "motion-model"
 
@@ -110,3 +111,9 @@ def load_motion_model(path: str | os.PathLike[str]) -> tuple[MotionModel, dict[s
     except (KeyError, TypeError, ValueError) as e:
         raise StoreError(f"{path}: the motion-model contents are incomplete: {e}") from e
     return with_body_height(model), meta.get("extra", {})
+
+
+def load_default_model() -> MotionModel:
+    """The shipped :class:`~jcrowd.model.motion_model.MotionModel` (fitted from CMU subject 16's
+    walks and turns; no data folder needed)."""
+    return load_motion_model(default_model_path())[0]

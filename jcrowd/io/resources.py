@@ -5,13 +5,11 @@ from __future__ import annotations
 
 from importlib import resources
 from pathlib import Path
-from typing import Any
 
 __all__ = [
     "body_path",
     "default_model_path",
     "demo_scenario_path",
-    "load_default_model",
     "sample_bvh_path",
 ]
 
@@ -50,9 +48,3 @@ def demo_scenario_path() -> Path:
     the two identical), shipped so the demo works from an installed wheel."""
     return _asset("plaza.toml")
 
-
-def load_default_model() -> Any:
-    """The shipped :class:`~jcrowd.model.motion_model.MotionModel` (no data folder needed)."""
-    from jcrowd.io.model_file import load_motion_model
-
-    return load_motion_model(default_model_path())[0]

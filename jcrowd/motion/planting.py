@@ -7,10 +7,10 @@ heel strike) slide their stance foot by 2–3 times what the captures' own feet 
 (``bench/follow.py``). Moving the root to lock the foot, as the step does without the dynamics,
 would move it off the simulated position; production crowd tools pin the foot and solve the
 leg instead, and so does :func:`plant_feet`, on the points of agents drawn at the near levels
-(``≤ blend_max_level``) when :attr:`~jcrowd.crowd.state.StepConfig.plant_feet` is set. It is
-off by default: a foot held off its decoded place snaps back when its agent leaves the near
-levels (nothing plants the coarse levels), and a walker slowing to stand, its phase playing on
-while its root hardly moves, holds its feet up to :data:`MAX_SLIP` off the standing pose.
+(``≤ blend_max_level``; :attr:`~jcrowd.crowd.state.StepConfig.plant_feet`, on by default).
+An agent leaving the near levels eases from its planted pose (the level blend decodes the old
+level planted, its pins carried on), and ``jcrowd export`` writes the planting as joint
+rotations (:func:`planted_rotations`).
 
 **Stance** is a static window of the aligned phase per foot: it opens at the foot's heel strike
 (:attr:`~jcrowd.crowd.clips.CrowdModel.double_support`: the left heel strikes where the left
@@ -38,13 +38,14 @@ hip–ankle distance, the knee sits ``a = (l₁² − l₂² + d²) / 2d`` along
 at full reach along the hip–ankle line.
 
 State: per agent and foot the pin (or the release offset over the swing), whether the foot
-was planted in the last frame and whether its toe is the planted joint: 20 bytes. Agents not
-drawn at a near level have no pins: their state is reset each frame, and a foot planted when
-an agent comes near starts where it is.
+was planted in the last frame and whether its toe is the planted joint: 20 bytes. Agents
+neither drawn at a near level nor easing from one have no pins: their state is reset each
+frame, and a foot planted when an agent comes near starts where it is.
 """
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import jax
@@ -52,16 +53,18 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from jcrowd.pedestrians.heading import smoothstep
+from jcrowd.motion.rotation import quat_inv, quat_mul, quat_rotate
 
 __all__ = [
     "MAX_SLIP",
     "RELEASE_SHARE",
+    "SEQUENCE_BLOCK",
     "STANCE_SHARE",
     "Legs",
     "leg_chains",
     "plant_feet",
     "plant_sequence",
+    "planted_rotations",
     "reach",
 ]
 
@@ -81,6 +84,12 @@ further than this off the hip–ankle line, it decides the bend's side."""
 Legs = tuple[tuple[int, int, int, int, tuple[int, ...]], ...]
 """Per foot (left, right): hip, knee, ankle, toe point indices and the ankle's descendants (the
 ankle included)."""
+
+
+def _smoothstep(x: Array) -> Array:
+    """``3x² − 2x³`` on ``x`` clipped to ``[0, 1]``."""
+    c = jnp.clip(x, 0.0, 1.0)
+    return c * c * (3.0 - 2.0 * c)
 
 
 def leg_chains(parents: tuple[int, ...], feet: tuple[int, int, int, int]) -> Legs:
@@ -166,7 +175,7 @@ def plant_feet(
         delta = jnp.where(
             stance,
             jnp.where(on[f], held, 0.0),
-            release * (1.0 - smoothstep(swing)),
+            release * (1.0 - _smoothstep(swing)),
         )
         lowest = jnp.where(low_toe, points[toe_j, xz], points[ankle, xz])
         pins.append(jnp.where(stance, lowest + delta, release))
@@ -180,6 +189,11 @@ def plant_feet(
     return points, jnp.stack(pins), jnp.stack(ons), jnp.stack(toes)
 
 
+SEQUENCE_BLOCK = 256
+""":func:`plant_sequence` pads a clip to a multiple of this many frames, so clips of any length
+share a few compiled programs (one per length would fill memory over a crowd's agents)."""
+
+
 def plant_sequence(
     legs: Legs,
     stance_start: tuple[float, float],
@@ -190,6 +204,24 @@ def plant_sequence(
 ) -> Float[Array, "F P 3"]:
     """One agent's frames with its feet planted as the step plants them frame by frame (from no
     pins): for a walker re-synthesized off line, drawn at a near level throughout."""
+    f = points.shape[0]
+    size = -(-f // SEQUENCE_BLOCK) * SEQUENCE_BLOCK
+    # Frames repeated past the end: the scan is causal, so they change nothing before it.
+    pts = jnp.concatenate([points, jnp.repeat(points[-1:], size - f, axis=0)])
+    phases = jnp.concatenate([tau, jnp.repeat(tau[-1:], size - f)])
+    return _plant_scan(legs, stance_start, last, pts, phases, jnp.asarray(scale))[:f]
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+def _plant_scan(
+    legs: Legs,
+    stance_start: tuple[float, float],
+    last: float,
+    points: Array,
+    tau: Array,
+    scale: Array,
+) -> Array:
+    """:func:`plant_sequence` over a padded clip: one ``lax.scan`` of :func:`plant_feet`."""
 
     def one(carry: tuple[Array, Array, Array], x: tuple[Array, Array]) -> tuple[Any, Array]:
         p, t = x
@@ -198,4 +230,44 @@ def plant_sequence(
 
     start = (jnp.zeros((2, 2), points.dtype), jnp.zeros(2, bool), jnp.zeros(2, bool))
     _, out = jax.lax.scan(one, start, (points, tau))
+    return out
+
+
+def _least_rotation(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Quaternions ``(..., 4)`` turning directions ``u`` onto ``v`` about ``u × v`` (the least
+    rotation; ``u`` and ``v`` never opposite here: a bone turned by a few degrees)."""
+    u = u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)
+    v = v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+    q = np.concatenate([1.0 + np.sum(u * v, axis=-1, keepdims=True), np.cross(u, v)], axis=-1)
+    return q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
+
+
+def planted_rotations(
+    parents: tuple[int, ...],
+    legs: Legs,
+    local: Float[np.ndarray, "F J 4"],
+    world: Float[np.ndarray, "F J 4"],
+    before: Float[np.ndarray, "F J 3"],
+    after: Float[np.ndarray, "F J 3"],
+) -> np.ndarray:
+    """Local joint rotations whose forward kinematics put the legs where :func:`plant_feet` put
+    their points (``before`` → ``after``, joint positions), for writing a planted walker as a
+    clip. Per leg: the hip joint turns its thigh onto the new knee and the knee its shin onto
+    the new ankle (the least rotations, keeping each bone's twist); the ankle keeps its world
+    rotation (the foot was moved, not turned), so everything below it follows unchanged.
+    ``local`` and ``world``: the clip's local and global rotations (scalar-first)."""
+    out = np.array(local, np.float64, copy=True)
+    for hip, knee, ankle, _, _ in legs:
+        r_hip = quat_mul(
+            _least_rotation(before[:, knee] - before[:, hip], after[:, knee] - after[:, hip]),
+            world[:, hip],
+        )
+        parent = parents[hip]
+        out[:, hip] = r_hip if parent < 0 else quat_mul(quat_inv(world[:, parent]), r_hip)
+        r_knee = quat_mul(r_hip, local[:, knee])
+        shin = quat_rotate(quat_inv(world[:, knee]), before[:, ankle] - before[:, knee])
+        turn = _least_rotation(quat_rotate(r_knee, shin), after[:, ankle] - after[:, knee])
+        r_knee = quat_mul(turn, r_knee)
+        out[:, knee] = quat_mul(quat_inv(r_hip), r_knee)
+        out[:, ankle] = quat_mul(quat_inv(r_knee), world[:, ankle])
     return out
