@@ -89,12 +89,12 @@ from jcrowd import load_default_model
 from jcrowd.cli.run import simulate
 from jcrowd.crowd import prepare
 from jcrowd.crowd.level_blend import BLEND_SECONDS
-from jcrowd.motion.planting import plant_sequence
 from jcrowd.io import load_dataset
 from jcrowd.model import agent_motion, foot_skate
 from jcrowd.motion.clip import joint_positions
 from jcrowd.motion.footlock import slides_of_points
 from jcrowd.motion.gait import find_feet
+from jcrowd.motion.planting import plant_sequence
 from jcrowd.motion.skeleton import rest_positions
 from jcrowd.render.camera import View, project
 from jcrowd.scenario import load_scenario

@@ -14,13 +14,13 @@ from jcrowd.io.bvh import read_bvh as read_bvh
 from jcrowd.io.bvh_write import write_bvh as write_bvh
 from jcrowd.io.dataset import LABEL_COLUMNS as LABEL_COLUMNS
 from jcrowd.io.dataset import load_dataset as load_dataset
+from jcrowd.io.model_file import load_default_model as load_default_model
 from jcrowd.io.model_file import load_motion_model as load_motion_model
 from jcrowd.io.model_file import save_motion_model as save_motion_model
 from jcrowd.io.report import summary_text as summary_text
 from jcrowd.io.report import write_fit_report as write_fit_report
 from jcrowd.io.resources import default_model_path as default_model_path
 from jcrowd.io.resources import demo_scenario_path as demo_scenario_path
-from jcrowd.io.model_file import load_default_model as load_default_model
 from jcrowd.io.resources import sample_bvh_path as sample_bvh_path
 from jcrowd.io.store import FORMAT_VERSION as FORMAT_VERSION
 from jcrowd.io.store import load_store as load_store

@@ -47,4 +47,3 @@ def demo_scenario_path() -> Path:
     """The plaza scenario ``jcrowd demo`` runs: a copy of ``examples/plaza.toml`` (a test keeps
     the two identical), shipped so the demo works from an installed wheel."""
     return _asset("plaza.toml")
-
