@@ -402,6 +402,8 @@ BAD = [
      r"lod\.capacities: expected 6 positive integers \(one per level\), found \[9, 9, 9, 9, 9, 0"),
     ("negative min_pixels", "[[groups]]", "[lod]\nmin_pixels = -1\n[[groups]]",
      r"lod\.min_pixels: expected a height in pixels >= 0, found -1"),
+    ("plant_feet not a switch", "[[groups]]", "[lod]\nplant_feet = 1\n[[groups]]",
+     r"lod\.plant_feet: expected true or false, found 1"),
     ("lod thresholds not increasing", "[[groups]]", "[lod]\nthresholds = [30, 20]\n[[groups]]",
      r"lod\.thresholds: expected increasing distances > 0 \(m\), found \[30, 20\]"),
     ("negative seed", "seed = 7", "seed = -1",

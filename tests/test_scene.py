@@ -221,3 +221,13 @@ def test_the_entrance_example_passes_people_at_the_measured_rate():
     assert abs(flow / 1.16 - 1) <= 0.25, flow
     assert abs(total / 64.5 - 1) <= 0.25, total
     assert inside == 0
+
+
+def test_lod_plant_feet_reaches_the_step():
+    """``[lod] plant_feet`` (default true) is the step's ``plant_feet``."""
+    model = load_default_model()
+    on, _ = prepare(_scenario(BASE.format(avoid="true") + CROSSING), model)
+    off, _ = prepare(
+        _scenario(BASE.format(avoid="true") + "[lod]\nplant_feet = false\n" + CROSSING), model
+    )
+    assert on.config.plant_feet and not off.config.plant_feet

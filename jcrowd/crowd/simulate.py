@@ -223,6 +223,7 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         blend_max_level=lod.blend_max_level,
         importance=lod.screen,
         min_pixels=lod.min_pixels,
+        plant_feet=lod.plant_feet,
         avoid=scenario.dynamics.avoid,
         grid=_neighbour_grid(scenario) if scenario.dynamics.avoid else None,
         far_every=scenario.dynamics.far_every,

@@ -59,8 +59,8 @@ class StepConfig:
             the capacities hold); the others play the nearest captured cycle
             (:func:`jcrowd.crowd.clips.next_clips_lod`).
         avoid: the crowd dynamics drive the roots (:mod:`jcrowd.crowd.steering`): agents
-            avoid each other, the root is the simulated position, clips follow the velocity
-            and foot locking is off (it would move the root off the simulated position).
+            avoid each other, the root is the simulated position and clips follow the
+            velocity; ``foot_lock`` plants the feet instead of moving the root.
         grid: the dynamics' neighbour grid (required with ``avoid``).
         far_every: simulation level of detail: agents drawn coarser than ``blend_max_level``
             (or not drawn) compute their avoidance every ``far_every`` steps, in turn, and

@@ -60,6 +60,7 @@ _LOD = {  # TOML key → LodSettings field
     "blend_max_level": "blend_max_level",
     "importance": "screen",
     "min_pixels": "min_pixels",
+    "plant_feet": "plant_feet",
 }
 
 

@@ -181,6 +181,8 @@ class LodSettings:
     (agents beyond the last are drawn as dots and counted); None takes the crowd code's default
     budget. Levels ``≤ blend_max_level`` blend clips (−1: none does). ``min_pixels``: agents
     shorter than this on screen are not synthesized, only drawn as dots (0: none).
+    ``plant_feet``: with the dynamics on, agents at levels ``≤ blend_max_level`` plant their
+    stance feet and bend their legs to reach them (:mod:`jcrowd.motion.planting`).
     """
 
     thresholds_m: tuple[float, ...] = DEFAULT_THRESHOLDS_M
@@ -189,6 +191,7 @@ class LodSettings:
     blend_max_level: int = 1
     screen: str = "distance"
     min_pixels: float = 3.0
+    plant_feet: bool = True
 
     @property
     def num_levels(self) -> int:
@@ -220,6 +223,8 @@ class LodSettings:
         m = self.min_pixels
         require(real(m) and 0 <= m, "min_pixels", "a height in pixels >= 0", m)
         object.__setattr__(self, "min_pixels", float(m))
+        ok = isinstance(self.plant_feet, bool)
+        require(ok, "plant_feet", "true or false", self.plant_feet)
 
 
 MAX_AVOID_COVER = 1.0 / 3.0
