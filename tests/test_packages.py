@@ -1,4 +1,6 @@
-"""The package's shape: no import circle anywhere in jcrowd/, and every module imports alone.
+"""The package's shape: no import circle anywhere in jcrowd/, every module imports alone, module
+docstrings say what the code does in at most 40 lines and functions fit in 80 (the limits the
+project keeps so that a module reads top to bottom).
 
 Oracle for the circles: Tarjan's strongly connected components over grimp's module graph (the
 same graph ``lint-imports`` checks its contracts on), counting imports inside functions too. A
@@ -7,8 +9,10 @@ circle is what makes ``import jcrowd.cli.render`` fail or depend on what was imp
 
 from __future__ import annotations
 
+import ast
 import subprocess
 import sys
+from pathlib import Path
 
 import grimp
 
@@ -81,3 +85,26 @@ def test_the_cli_modules_and_packages_import_on_their_own() -> None:
     ]
     for name in names:
         subprocess.run([sys.executable, "-c", f"import {name}"], check=True, timeout=120)
+
+
+_SOURCES = sorted((Path(__file__).resolve().parents[1] / "jcrowd").rglob("*.py"))
+
+
+def test_module_docstrings_are_at_most_40_lines() -> None:
+    long = {}
+    for path in _SOURCES:
+        doc = ast.get_docstring(ast.parse(path.read_text()))
+        if doc and len(doc.splitlines()) > 40:
+            long[str(path)] = len(doc.splitlines())
+    assert _SOURCES and not long, long
+
+
+def test_functions_are_at_most_80_lines() -> None:
+    long = {}
+    for path in _SOURCES:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                lines = (node.end_lineno or node.lineno) - node.lineno + 1
+                if lines > 80:
+                    long[f"{path}:{node.lineno} {node.name}"] = lines
+    assert not long, long

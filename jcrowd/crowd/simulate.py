@@ -250,12 +250,8 @@ def prepare(scenario: Scenario, model: MotionModel) -> tuple[Simulation, CrowdSt
         )
         per_step = np.bincount(np.floor(times * scenario.fps).astype(np.int64)).max()
         pool = Pool(reservoir, jnp.asarray(times, jnp.float32), n0, int(2 * per_step + 8))
-    state = init_state(
-        crowd,
-        arrays,
-        key_slots if pool is not None else jax.random.key(scenario.seed),
-        resting=config.avoid,
-    )
+    key = key_slots if pool is not None else jax.random.key(scenario.seed)
+    state = init_state(crowd, arrays, key, resting=config.avoid)
     return Simulation(crowd, config, scenario, sp, world, pool), state
 
 

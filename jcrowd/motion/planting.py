@@ -1,56 +1,35 @@
 """Planted feet for walkers the simulation moves: each stance foot stays where it landed, the
 leg bending to reach it (two-bone IK), and lets go over the swing that follows.
 
-With the crowd dynamics on, the root walks the simulated path, smooth and straight, while the
-decoded legs (level 0 keeps 30 of the 100 aligned frames in its time mode, which smooths the
-heel strike) slide their stance foot by 2–3 times what the captures' own feet slide
-(``bench/follow.py``). Moving the root to lock the foot, as the step does without the dynamics,
-would move it off the simulated position; production crowd tools pin the foot and solve the
-leg instead, and so does :func:`plant_feet`, on the points of agents drawn at the near levels
-(``≤ blend_max_level``; :attr:`~jcrowd.crowd.state.StepConfig.plant_feet`, on by default).
-An agent leaving the near levels eases from its planted pose (the level blend decodes the old
-level planted, its pins carried on), and ``jcrowd export`` writes the planting as joint
+With the crowd dynamics on, the root walks the simulated path while the decoded legs slide their
+stance foot by 2–3 times what the captures' own feet slide (``bench/follow.py``). Moving the
+root to lock the foot would move it off the simulated position; production crowd tools pin the
+foot and solve the leg instead, and so does :func:`plant_feet`, for agents drawn at the near
+levels (``≤ blend_max_level``; :attr:`~jcrowd.crowd.state.StepConfig.plant_feet`). An agent
+leaving them eases from its planted pose, and ``jcrowd export`` writes the planting as joint
 rotations (:func:`planted_rotations`).
 
 **Stance** is a static window of the aligned phase per foot: it opens at the foot's heel strike
-(:attr:`~jcrowd.crowd.clips.CrowdModel.double_support`: the left heel strikes where the left
-ankle is furthest ahead) and lasts :data:`STANCE_SHARE` of the cycle. Every clip is aligned to
-one reference cycle, so the window holds for every clip of the model. Our reading of the
+(:attr:`~jcrowd.crowd.clips.CrowdModel.double_support`) and lasts :data:`STANCE_SHARE` of the
+cycle, which holds for every clip (all are aligned to one reference cycle). Our reading of the
 stance length: 60 % of the gait cycle at walking speeds (Perry & Burnfield, *Gait Analysis*,
-2010, ch. 1), so both windows hold a phase at each double support, and a standing walker (its
-phase waiting at a double-support phase) has both feet planted.
+2010, ch. 1), so a standing walker (its phase waiting at a double support) has both feet down.
 
 **The pin** (per foot, world ``x, z``): at the stance's first frame the foot's planted joint
-(the lower of ankle and toe, heel down then toe down, as :func:`jcrowd.model.foot_skate`
-measures) is pinned where it is; in later frames the foot is moved horizontally by
-``δ = pin − planted joint`` (``|δ|`` at most :data:`MAX_SLIP` times the skeleton scale: beyond
-it the foot slides). When the planted joint changes from ankle to toe the pin moves to the toe
-plus ``δ``, so ``δ`` is continuous. At the stance's end ``δ`` is kept and eases to 0 over the
-first :data:`RELEASE_SHARE` of the swing (smoothstep), a lifted foot catching up with its
-decoded path.
+(the lower of ankle and toe, as :func:`jcrowd.model.foot_skate` measures) is pinned where it
+is; later the foot is moved horizontally by ``δ = pin − planted joint`` (``|δ|`` at most
+:data:`MAX_SLIP` times the skeleton scale: beyond it the foot slides). When the planted joint
+changes from ankle to toe the pin moves to the toe plus ``δ``, so ``δ`` is continuous. After
+the stance ``δ`` eases to 0 over the first :data:`RELEASE_SHARE` of the swing (smoothstep).
 
-**The leg** (hip, knee, ankle, in the points): the ankle and everything below it move by
-``δ``; the knee is placed so that thigh and shin keep their lengths, in the plane of the hip,
-the new ankle and the decoded knee (the closed-form two-bone solution: with ``d`` the
-hip–ankle distance, the knee sits ``a = (l₁² − l₂² + d²) / 2d`` along the hip–ankle line and
-``√(l₁² − a²)`` off it, towards the decoded knee, leaning towards the toe by
-:data:`POLE_WEIGHT` so a straight leg keeps its knee in front).
+**The leg**: the ankle and everything below it move by ``δ``; the knee is placed so that thigh
+and shin keep their lengths, in the plane of the hip, the new ankle and the decoded knee (the
+closed-form two-bone solution, with the reach softened near a straight leg: :func:`reach`).
 
-**Soft reach.** Near full reach ``L = l₁ + l₂`` the knee's offset ``√(l₁² − a²)`` changes
-without bound per unit of ``d``: clamped at ``L``, a target 1 mm further swings a nearly
-straight knee by over a centimetre (``∝ √Δ``), and two levels of detail whose decoded hips differ
-by a centimetre draw knees that differ by several. Beyond ``s = max((1 − SOFT_REACH)·L, d₀)``
-(``d₀`` the decoded hip–ankle distance) the reach is softened, as game rigs' "soft IK" does:
-``d' = s + (L − s)(1 − exp(−(d − s)/(L − s)))``, approaching full reach without getting there,
-so the knee straightens no faster than the target moves. Taking ``d₀`` into ``s`` leaves the
-decoded leg exactly as it is when the foot needs no moving (``d = d₀``): the captured legs
-spend much of the stance beyond 0.9 L (median 0.97 L on ``cmu16``), and a softening from
-0.9 L alone would bend them all. The foot then stops short of its pin on the hip–pin line.
-
-State: per agent and foot the pin (or the release offset over the swing), whether the foot
-was planted in the last frame and whether its toe is the planted joint: 20 bytes. Agents
-neither drawn at a near level nor easing from one have no pins: their state is reset each
-frame, and a foot planted when an agent comes near starts where it is.
+State: per agent and foot the pin (or the release offset), whether the foot was planted in the
+last frame and whether its toe is the planted joint: 20 bytes. Agents neither drawn at a near
+level nor easing from one have no pins; a foot planted when an agent comes near starts where
+it is.
 """
 
 from __future__ import annotations
@@ -94,7 +73,7 @@ further than this off the hip–ankle line, it decides the bend's side."""
 
 SOFT_REACH = 0.1
 """The share of the leg's full reach (thigh + shin) over which the reach is softened: a target
-that far or further from full reach is approached exponentially (module docstring)."""
+that far or further from full reach is approached exponentially (:func:`reach`)."""
 
 Legs = tuple[tuple[int, int, int, int, tuple[int, ...]], ...]
 """Per foot (left, right): hip, knee, ankle, toe point indices and the ankle's descendants (the
@@ -134,7 +113,23 @@ def reach(
     target: Array,
 ) -> tuple[Array, Array]:
     """Two-bone IK: the knee and ankle for an ankle wanted at ``target``, thigh and shin keeping
-    their lengths, the knee bending towards where it was and the toe (module docstring)."""
+    their lengths ``l₁, l₂``.
+
+    With ``d`` the hip–target distance the knee sits ``a = (l₁² − l₂² + d²) / 2d`` along the
+    hip–target line and ``√(l₁² − a²)`` off it, towards the decoded knee, leaning towards the
+    toe by :data:`POLE_WEIGHT` so a straight leg keeps its knee in front.
+
+    **Soft reach.** Near full reach ``L = l₁ + l₂`` the knee's offset changes without bound per
+    unit of ``d`` (``∝ √(L − d)``): clamped at ``L``, a target 1 mm further swings a nearly
+    straight knee by over a centimetre, and two levels of detail whose hips differ by a
+    centimetre draw knees several apart. Beyond ``s = max((1 − SOFT_REACH)·L, d₀)`` (``d₀`` the
+    decoded hip–ankle distance) ``d`` is softened as game rigs' "soft IK" does:
+    ``d' = s + (L − s)(1 − exp(−(d − s)/(L − s)))``, approaching full reach without getting
+    there, so the knee straightens no faster than the target moves. Taking ``d₀`` into ``s``
+    leaves the decoded leg as it is when the foot needs no moving (``d = d₀``): captured legs
+    spend much of the stance beyond 0.9 L (median 0.97 L on ``cmu16``), and softening from
+    0.9 L alone would bend them all. The ankle then stops short of the target on its line.
+    """
     l1 = jnp.linalg.norm(knee - hip)
     l2 = jnp.linalg.norm(ankle - knee)
     d_vec = target - hip
