@@ -55,7 +55,8 @@ recording (skate and pops over each agent slot's first life, :func:`alive_span`)
   where it stands to where it is first ``NEXT_M`` away; our reading of "facing where it wants
   to go", as the recording holds no desired direction); ``pop_px`` and ``steady_px`` (p99):
   ``pop_cm`` and ``steady_jump_cm``'s jumps with every joint projected through the scene's
-  camera of that frame into a ``PIXELS`` image.
+  camera of that frame into a ``PIXELS`` image, over the joints on screen (in front of the
+  camera and inside the image: a jump nobody can see is not counted).
 - ``queue_motion`` (entrance only), the simulated queue beside the measured one (the Wuppertal
   run ``040_c_56_h-``, ``../shared/data/pedestrians``), the same measure on both: in front of the
   gap (``0.3 < z < 4`` m), the direction of travel over a 0.4 s window (``QUEUE_WINDOW_S``;
@@ -320,15 +321,20 @@ def pixel_jumps(own, r0, r1, view_ids, views) -> np.ndarray:
     and the level-0 ones of each step ``r0, r1 (F − 1, J, 3)`` (the earlier and the later
     frame's), projected with the view of the step's later frame
     (``views[view_ids[f]]``; one projection per distinct view: a fixed camera projects every
-    frame at once)."""
+    frame at once). Only joints on screen count: beyond the near plane in all four and, drawn
+    in the later frame, inside the image (a point behind the camera projects to meaningless
+    pixels, :func:`~jcrowd.render.camera.project`); NaN where none is."""
     pairs = np.stack([own[:-1], own[1:], r0, r1], axis=1)  # (F−1, 4, J, 3)
     out = np.full(len(own) - 1, np.nan)
     later = view_ids[1:]
+    size = np.array(PIXELS, np.float64)
     for k in np.unique(later):
         sel = later == k
-        q, _ = project(pairs[sel], views[k], *PIXELS)
-        d = (q[:, 1] - q[:, 0]) - (q[:, 3] - q[:, 2])
-        out[sel] = np.max(np.linalg.norm(d, axis=-1), axis=-1)
+        q, front = project(pairs[sel], views[k], *PIXELS)
+        shown = front.all(axis=1) & ((q[:, 1] >= 0) & (q[:, 1] < size)).all(axis=-1)
+        d = np.linalg.norm((q[:, 1] - q[:, 0]) - (q[:, 3] - q[:, 2]), axis=-1)
+        d = np.where(shown, d, -np.inf).max(axis=-1)
+        out[sel] = np.where(np.isfinite(d), d, np.nan)
     return out
 
 
@@ -445,14 +451,16 @@ def measure(model, name: str, steps: int | None) -> dict:
             if np.isfinite(window).any():
                 pops.append(100 * np.nanmax(window))
                 ratios.append(np.nanmax(window) / normal)
-                pops_px.append(np.nanmax(np.where(wrap, np.nan, extra_px)[f : min(stop, f + ease)]))
+                seen = np.where(wrap, np.nan, extra_px)[f : min(stop, f + ease)]
+                if np.isfinite(seen).any():
+                    pops_px.append(np.nanmax(seen))
         steady.extend(100 * extra[calm & drawn_both])
         for r0, r1 in level0_runs(lv):
             slid = slides_of_points(
                 own[r0:r1].astype(np.float64), model.skeleton.scaled(scale), fps
             )
             drawn_slides.extend(100 * np.linalg.norm(step, axis=1) for _, step in slid)
-        steady_px.extend(extra_px[calm & drawn_both])
+        steady_px.extend(extra_px[calm & drawn_both & np.isfinite(extra_px)])
     print(f"{name}: {steps} steps, {n} agents, {len(pops)} level changes", file=sys.stderr)
 
     def pct(v, q):
