@@ -153,6 +153,11 @@ def level0_joints(model, rec: dict, agent: int, span: tuple[int, int], cm=None):
     joints = np.asarray(joint_positions(motion))
     if cm is None or not cm.legs:
         return motion, joints, None
+    return motion, joints, _planted(model, cm, rec, agent, joints, sub["tau"][:, agent])
+
+
+def _planted(model, cm, rec: dict, agent: int, joints: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """``joints (F, J, 3)`` with the feet planted from fresh pins at the first frame."""
     j = joints.shape[1]
     size = max(max(leg[4]) for leg in cm.legs) + 1  # the legs' End Sites follow the joints
     pts = np.concatenate([joints, np.zeros((len(joints), max(size - j, 0), 3), joints.dtype)], 1)
@@ -162,10 +167,22 @@ def level0_joints(model, rec: dict, agent: int, span: tuple[int, int], cm=None):
         (float(cm.double_support[0]), float(cm.double_support[1])),
         float(cm.frames - 1),
         jnp.asarray(pts),
-        jnp.asarray(sub["tau"][:, agent], jnp.float32),
+        jnp.asarray(tau, jnp.float32),
         jnp.float32(scale),
     )
-    return motion, joints, np.asarray(planted)[:, :j]
+    return np.asarray(planted)[:, :j]
+
+
+def planted_in_runs(model, cm, rec, agent, span, loose, near) -> np.ndarray:
+    """The level-0 joints ``loose`` planted as the step plants this agent: from fresh pins at
+    the start of each run of frames it is drawn near (``near (F,)``), as the step's pins start
+    when an agent comes near; ``loose`` elsewhere."""
+    out = loose.copy()
+    edges = np.diff(np.concatenate([[0], near.astype(int), [0]]))
+    for r0, r1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True):
+        tau = rec["tau"][span[0] + r0 : span[0] + r1, agent]
+        out[r0:r1] = _planted(model, cm, rec, agent, loose[r0:r1], tau)
+    return out
 
 
 NO_PLANT = False
@@ -425,10 +442,15 @@ def measure(model, name: str, steps: int | None) -> dict:
         lv = level[a:b, agent]
         move = np.diff(own, axis=0)
         # Each frame step is compared with the level-0 walker drawn as this one is: planted
-        # where both frames are at a near level (when the step plants), else not.
+        # where both frames are at a near level (when the step plants, from fresh pins each
+        # time the agent comes near, as the step's), else not.
+        if planted is not None:
+            drawn_ref = planted_in_runs(model, planting, rec, agent, span, loose, lv <= near_max)
+        else:
+            drawn_ref = loose
         both_near = ((lv[1:] <= near_max) & (lv[:-1] <= near_max))[:, None, None]
-        r0 = np.where(both_near, ref[:-1], loose[:-1])
-        r1 = np.where(both_near, ref[1:], loose[1:])
+        r0 = np.where(both_near, drawn_ref[:-1], loose[:-1])
+        r1 = np.where(both_near, drawn_ref[1:], loose[1:])
         extra = np.linalg.norm(move - (r1 - r0), axis=-1).max(axis=1)
         extra_px = np.where(
             np.isfinite(extra), pixel_jumps(own, r0, r1, view_ids[a:b], views), np.nan
