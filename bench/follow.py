@@ -153,11 +153,12 @@ def level0_joints(model, rec: dict, agent: int, span: tuple[int, int], cm=None):
     joints = np.asarray(joint_positions(motion))
     if cm is None or not cm.legs:
         return motion, joints, None
-    return motion, joints, _planted(model, cm, rec, agent, joints, sub["tau"][:, agent])
+    return motion, joints, _planted(model, cm, rec, agent, joints, a, b)
 
 
-def _planted(model, cm, rec: dict, agent: int, joints: np.ndarray, tau: np.ndarray) -> np.ndarray:
-    """``joints (F, J, 3)`` with the feet planted from fresh pins at the first frame."""
+def _planted(model, cm, rec: dict, agent: int, joints: np.ndarray, a: int, b: int) -> np.ndarray:
+    """``joints (F, J, 3)``, the agent's frames ``a`` to ``b``, with the feet planted from fresh
+    pins at the first frame, with the stride warp the step drew them with."""
     j = joints.shape[1]
     size = max(max(leg[4]) for leg in cm.legs) + 1  # the legs' End Sites follow the joints
     pts = np.concatenate([joints, np.zeros((len(joints), max(size - j, 0), 3), joints.dtype)], 1)
@@ -167,8 +168,10 @@ def _planted(model, cm, rec: dict, agent: int, joints: np.ndarray, tau: np.ndarr
         (float(cm.double_support[0]), float(cm.double_support[1])),
         float(cm.frames - 1),
         jnp.asarray(pts),
-        jnp.asarray(tau, jnp.float32),
+        jnp.asarray(rec["tau"][a:b, agent], jnp.float32),
         jnp.float32(scale),
+        jnp.asarray(rec["heading"][a:b, agent], jnp.float32) if "stride" in rec else None,
+        jnp.asarray(rec["stride"][a:b, agent], jnp.float32) if "stride" in rec else None,
     )
     return np.asarray(planted)[:, :j]
 
@@ -180,8 +183,8 @@ def planted_in_runs(model, cm, rec, agent, span, loose, near) -> np.ndarray:
     out = loose.copy()
     edges = np.diff(np.concatenate([[0], near.astype(int), [0]]))
     for r0, r1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True):
-        tau = rec["tau"][span[0] + r0 : span[0] + r1, agent]
-        out[r0:r1] = _planted(model, cm, rec, agent, loose[r0:r1], tau)
+        a, b = span[0] + r0, span[0] + r1
+        out[r0:r1] = _planted(model, cm, rec, agent, loose[r0:r1], a, b)
     return out
 
 

@@ -18,6 +18,7 @@ from jcrowd.motion.planting import (
     plant_feet,
     plant_sequence,
     reach,
+    warp_stride,
 )
 
 # A toy skeleton's points: root 0; left hip 1, knee 2, ankle 3, toe 4; right 5–8; the toes' End
@@ -140,6 +141,36 @@ def test_a_planted_foot_stays_and_lets_go_smoothly():
     np.testing.assert_allclose(out[-5:, 4], pts[-5:, 4], atol=1e-6)
     # The right foot's decoded points do not move, and planted they stay where they are.
     np.testing.assert_allclose(out[:, 5:9], pts[:, 5:9], atol=1e-5)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    heading=st.floats(-np.pi, np.pi),
+    stride=st.floats(0.0, 1.0),
+    ahead=st.floats(-0.4, 0.4),
+)
+def test_a_stride_warp_scales_the_feet_forward_offset_from_the_hips(heading, stride, ahead):
+    """warp_stride on a toy walker turned to ``heading`` with its left foot ``ahead`` m in front
+    of its hip: in the body's frame (a rotation by −heading, by hand) the left ankle sits
+    ``stride · ahead`` in front of the hip, sideways and vertically where it was; the toe and
+    its End Site move with the ankle; hips, knees and the right foot (under its hip) stay."""
+    legs = leg_chains(PARENTS, FEET)
+    p, _ = _walker(1, 0.0)
+    p = p[0].astype(np.float64)
+    p[[3, 4, 9], 2] += ahead  # body frame: +z forward
+    c, s = np.cos(heading), np.sin(heading)
+    rot = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])  # +z → (sin θ, 0, cos θ)
+    world = p @ rot.T
+    out = np.asarray(
+        warp_stride(
+            legs, jnp.asarray(world, jnp.float32), jnp.float32(heading), jnp.float32(stride)
+        ),
+        np.float64,
+    )
+    body = out @ rot  # back into the body frame
+    want = p.copy()
+    want[[3, 4, 9], 2] -= (1.0 - stride) * ahead
+    np.testing.assert_allclose(body, want, atol=2e-6)
 
 
 def test_planting_transforms():

@@ -33,7 +33,8 @@ own block of agents, and process 0 writes the recording. Each process prints its
 
 Arrays are named ``position``, ``heading``, ``level``, ``dots``, ``alive``, ``slots_l``,
 ``valid_l``, ``points_l``, ``tau``, ``control``, ``control_next``, ``has_next``, ``stands``
-(with the dynamics on: standing at a double-support phase) plus ``height``,
+(with the dynamics on: standing at a double-support phase), ``stride`` (the planted feet's
+stride warp, :func:`jcrowd.motion.planting.warp_stride`) plus ``height``,
 ``group``, ``color``, ``parents`` (bones to draw), ``obstacles`` (scenarios with walls: their
 prisms, :func:`jcrowd.render.meshes.prism_mesh`), ``eye``/``target`` per step and ``lens``
 (fov, near, far) of the camera, ``fps`` and ``model`` (the model file used)."""
@@ -223,6 +224,7 @@ PER_AGENT = frozenset(
         "control_next",
         "has_next",
         "stands",
+        "stride",
         "level",
         "dots",
     )
@@ -236,7 +238,7 @@ def _record_keys(sim: Any, record: str) -> list[str]:
     if record in ("visible", "all"):
         keys += [f"{k}_{lv}" for lv in range(len(sim.config.capacities)) for k in FRAME_KEYS]
     if record == "all":
-        keys += ["tau", "control", "control_next", "has_next", "stands"]
+        keys += ["tau", "control", "control_next", "has_next", "stands", "stride"]
     if sim.pool is not None:
         keys.append("agent")
     return keys
@@ -267,6 +269,7 @@ def _snapshot(sim: Any, record: str, state: Any, view: Any) -> dict[str, Any]:
             control_next=control_next,
             has_next=state.has_next,
             stands=state.stands,
+            stride=state.stride,
         )
     return _fetch(snapshot)
 

@@ -19,8 +19,14 @@ __all__ = [
     "SHUFFLE_CADENCE",
     "STAND_APPROACH",
     "STAND_BELOW",
+    "STRIDE_EASE_S",
+    "TURNING_DEG_S",
+    "TURN_CADENCE",
+    "TURN_STEP_DEG",
     "follow_phase",
     "stands_at",
+    "stride_warp",
+    "turns_on_the_spot",
 ]
 
 
@@ -53,8 +59,58 @@ cycle (measured on the entrance run: 0.4 of it put 4 % of the slow agent-frames 
 the mean cadence)."""
 
 
+TURN_STEP_DEG = 30.0
+"""A standing body whose heading has turned this far (degrees) from where it stood takes a step
+on the spot (:func:`turns_on_the_spot`). Game rigs re-plant after 45° or so; ours is smaller
+because a planted foot is moved, not turned, so its heel or toe swings round the pin with the
+body until the step re-plants it."""
+
+TURNING_DEG_S = 10.0
+"""A slow agent between two double supports whose body turns faster than this (°/s) finishes
+its step at :data:`TURN_CADENCE`, not at :data:`STAND_APPROACH`."""
+
+TURN_CADENCE = 1.0
+"""A step on the spot runs at this fraction of the model's mean cadence: half a cycle, one
+foot lifted and set down under its hip at the body's new heading."""
+
+STRIDE_EASE_S = 0.3
+"""The stride warp (:func:`stride_warp`) changes by at most 1 over this many seconds, so a foot
+in the air does not jump when an agent starts or stops."""
+
+
+def turns_on_the_spot(
+    stands: Array, slow: Array, heading: Array, stand_heading: Array, facing: Array, dt: Array
+) -> Array:
+    """Which slow agents step on the spot this step: one standing (phase at a double support)
+    whose ``heading`` is more than :data:`TURN_STEP_DEG` from the ``stand_heading`` it stood at,
+    or one between double supports whose body turns (``heading`` → ``facing``) faster than
+    :data:`TURNING_DEG_S`."""
+
+    def wrapped(a: Array) -> Array:
+        return jnp.abs(jnp.remainder(a + jnp.pi, 2.0 * jnp.pi) - jnp.pi)
+
+    twisted = wrapped(heading - stand_heading) > jnp.deg2rad(TURN_STEP_DEG)
+    turning = wrapped(facing - heading) > jnp.deg2rad(TURNING_DEG_S) * dt
+    return slow & jnp.where(stands, twisted, turning)
+
+
+def stride_warp(stride: Array, slow: Array, dt: Array) -> Array:
+    """The stride warp after a step: towards 0 for an agent slower than :data:`STAND_BELOW`
+    (its feet step under its hips: standing, or turning on the spot), else towards 1 (the
+    decoded stride, which the phase follows), by at most ``dt / STRIDE_EASE_S``."""
+    target = jnp.where(slow, 0.0, 1.0)
+    most = dt / STRIDE_EASE_S
+    return stride + jnp.clip(target - stride, -most, most)
+
+
 def follow_phase(
-    cm: CrowdModel, tau: Array, natural: Array, walked: Array, stride: Array, dt: Array
+    cm: CrowdModel,
+    tau: Array,
+    natural: Array,
+    walked: Array,
+    stride: Array,
+    dt: Array,
+    turning: Array | None = None,
 ) -> Array:
     """The phase step of an agent whose root the simulation moves.
 
@@ -70,7 +126,9 @@ def follow_phase(
     times the model's mean rate, to the clip's next double-support phase
     (:attr:`~jcrowd.crowd.clips.CrowdModel.double_support`, both heels down) and waits there
     until the agent walks again: the standing pose is the clip's own double-support frame, and
-    the walk resumes from it.
+    the walk resumes from it. A slow agent ``turning`` on the spot (:func:`turns_on_the_spot`)
+    steps instead: its phase runs at :data:`TURN_CADENCE` times the mean to the next double
+    support, past the one it stands at.
     """
     rate = jnp.clip(walked / jnp.maximum(stride, 1e-4), 0.0, FOLLOW_MAX_RATE * natural)
     ahead = jnp.full_like(tau, 2.0 * (cm.frames - 1))
@@ -80,7 +138,14 @@ def follow_phase(
     shuffle = SHUFFLE_CADENCE * (cm.frames - 1) * dt / cm.cycle_seconds
     rate = jnp.where(walked < SHUFFLE_BELOW * dt, jnp.minimum(rate, shuffle), rate)
     slow = walked < STAND_BELOW * dt
-    return jnp.where(slow, jnp.where(ahead <= 1e-3, 0.0, towards), rate)
+    still = jnp.where(ahead <= 1e-3, 0.0, towards)
+    if turning is not None:
+        beyond = jnp.full_like(tau, 2.0 * (cm.frames - 1))
+        for p in _stand_phases(cm):
+            beyond = jnp.where((p - tau > 1e-3) & (p - tau < beyond), p - tau, beyond)
+        step = TURN_CADENCE * (cm.frames - 1) * dt / cm.cycle_seconds
+        still = jnp.where(turning, jnp.minimum(step, beyond), still)
+    return jnp.where(slow, still, rate)
 
 
 def stands_at(cm: CrowdModel, tau: Array) -> Array:

@@ -176,6 +176,10 @@ class CrowdState(eqx.Module):
     # With the dynamics on: the agent stands, its phase waiting at a double-support phase
     # (jcrowd.crowd.following.follow_phase).
     stands: Bool[Array, " N"]
+    # The stride warp of the planted feet (jcrowd.crowd.following.stride_warp: 1 walking, 0
+    # standing or turning on the spot) and the heading the agent last stood still at.
+    stride: Float[Array, " N"]
+    stand_heading: Float[Array, " N"]
     # Level changes ease in (jcrowd.crowd.level_blend): the level drawn in the last frame and
     # the level being blended from (L: none), with the blend's seconds left.
     shown: Int[Array, " N"]
@@ -306,6 +310,8 @@ def init_state(
         vz=0.0 * speed if resting else speed * jnp.cos(heading),
         radius=jnp.asarray(spawn.get("radius", np.full(n, DEFAULT_RADIUS)), jnp.float32),
         stands=jnp.zeros(n, bool),
+        stride=jnp.full(n, 0.0 if resting else 1.0, jnp.float32),
+        stand_heading=jnp.copy(heading),
         shown=jnp.full(n, len(cm.decoders.levels), jnp.int32),
         blend_from=jnp.full(n, len(cm.decoders.levels), jnp.int32),
         blend_left=jnp.zeros(n, jnp.float32),

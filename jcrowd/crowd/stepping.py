@@ -43,7 +43,13 @@ import jax.numpy as jnp
 from jaxtyping import Array, Int
 
 from jcrowd.crowd.clips import CrowdModel, local_to_world
-from jcrowd.crowd.following import STAND_BELOW, follow_phase, stands_at
+from jcrowd.crowd.following import (
+    STAND_BELOW,
+    follow_phase,
+    stands_at,
+    stride_warp,
+    turns_on_the_spot,
+)
 from jcrowd.crowd.level_blend import BlendRows, blend_plan, blend_sources
 from jcrowd.crowd.lod import (
     Buckets,
@@ -105,6 +111,7 @@ def _agent_level(
     dt: Array,
     cached: bool = False,
     follow: bool = False,
+    turning: Array | None = None,
 ):
     """Pose and root motion of agent ``i`` at ``level`` (one agent; batched by ``vmap``).
 
@@ -112,7 +119,8 @@ def _agent_level(
     that the stance foot stays put (see :func:`step`). ``cached``: the core is the agent's
     ``far_core`` (the coarsest level, kept current by
     :func:`jcrowd.crowd.state.refresh_far_cores`). ``follow``: the phase advances with the
-    distance the agent walks (:func:`~jcrowd.crowd.following.follow_phase`).
+    distance the agent walks (:func:`~jcrowd.crowd.following.follow_phase`); ``turning``: the
+    agents stepping on the spot (:func:`~jcrowd.crowd.following.turns_on_the_spot`).
     """
     lv = cm.decoders.levels[level]
     last = float(cm.frames - 1)
@@ -137,7 +145,8 @@ def _agent_level(
     dtau = dt * cm.decoders.fps / rates.delta_a
     if follow:
         walked = jnp.hypot(state.vx[i], state.vz[i]) * dt
-        dtau = follow_phase(cm, tau, dtau, walked, jnp.linalg.norm(rates.velocity) * h, dt)
+        turns = None if turning is None else turning[i]
+        dtau = follow_phase(cm, tau, dtau, walked, jnp.linalg.norm(rates.velocity) * h, dt, turns)
     dyaw = rates.yaw_rate * dtau
     dpos = local_to_world(rates.velocity * h * dtau, heading)
     if lock:
@@ -202,7 +211,7 @@ def decode_bucket(
 
 
 def _dead_reckoning(
-    cm: CrowdModel, state: CrowdState, dt: Array, follow: bool = False
+    cm: CrowdModel, state: CrowdState, dt: Array, follow: bool = False, turning: Array | None = None
 ) -> tuple[Array, Array, Array, Array]:
     """Root-only advance ``(dτ, dyaw, dx, dz)`` along the clip's arc at its mean rate (with
     ``follow``, the phase at the clip's mean stride per aligned frame,
@@ -214,7 +223,7 @@ def _dead_reckoning(
     if follow:
         walked = jnp.hypot(state.vx, state.vz) * dt
         stride = jnp.hypot(control[:, ix], control[:, iz]) / last
-        dtau = follow_phase(cm, state.tau, dtau, walked, stride, dt)
+        dtau = follow_phase(cm, state.tau, dtau, walked, stride, dt, turning)
     frac = dtau / last
     turn = control[:, iyaw]
     half = turn / 2
@@ -310,13 +319,14 @@ def _synthesis(
     blend: BlendRows,
     feet: tuple[Array, Array, Array],
     dt: Array,
+    turning: Array | None = None,
 ) -> tuple[CrowdState, list[Array], tuple[Array, Array, Array, Array]]:
     """Stage 4: per level, decode + forward kinematics of its bucket (eased from the old level
     where one is blending); every agent's root motion ``(dτ, dyaw, dx, dz)``, by dead
     reckoning for those not synthesized. Returns the state (far cores refreshed), each
     level's points and the root motion."""
     nlev = len(cm.decoders.levels)
-    dtau, dyaw, dx, dz = _dead_reckoning(cm, state, dt, config.avoid)
+    dtau, dyaw, dx, dz = _dead_reckoning(cm, state, dt, config.avoid, turning)
     points = []
     # Planted feet (with the dynamics): every agent's pins are rebuilt from the blend rows and
     # the near buckets; an agent in neither has none.
@@ -335,7 +345,9 @@ def _synthesis(
         in_decode = lv < nlev - 1
 
         def one(i, lv=lv, near=near, lock=lock, cached=cached, state=state, ease=in_decode):
-            pts, *motion = _agent_level(cm, lv, near, lock, state, i, dt, cached, config.avoid)
+            pts, *motion = _agent_level(
+                cm, lv, near, lock, state, i, dt, cached, config.avoid, turning
+            )
             return (blend.ease(i, pts) if ease else pts, *motion)
 
         used = jnp.sum(ok, dtype=jnp.int32)
@@ -391,6 +403,8 @@ def _plant(
             state.pin[i],
             state.planted[i],
             state.pin_toe[i],
+            state.heading[i],
+            state.stride[i],
         )
 
     out, pin, on, toe = jax.vmap(one)(pts, ids)
@@ -413,9 +427,9 @@ def _move_roots(
     vx, vz = state.vx, state.vz  # the dynamics' output; without them it stays as it was
     if config.avoid and facing is not None:
         dx, dz = vx * dt, vz * dt
-        # A body standing in double support keeps its heading: turning would slide its planted
-        # feet (turning on the spot is stepping, which the clips do not hold).
-        heading = jnp.where(state.stands, state.heading, facing)
+        # A standing body turns too: its feet stay planted until it has turned far enough to
+        # step on the spot (jcrowd.crowd.following.turns_on_the_spot).
+        heading = facing
     else:
         heading = state.heading + dyaw
     moved = (
@@ -428,7 +442,13 @@ def _move_roots(
     if config.avoid:  # (without the dynamics nobody stands: ``stands`` stays False)
         slow = jnp.hypot(vx, vz) < STAND_BELOW  # the speed the phase followed
         stands = alive & slow & stands_at(cm, state.tau)
-        state = eqx.tree_at(lambda s: s.stands, state, stands)
+        # The heading it stood still at: kept while it stands, followed otherwise.
+        still = jnp.where(stands & state.stands, state.stand_heading, state.heading)
+        # The stride warp the next frame is drawn with (this one's is the state's).
+        stride = stride_warp(state.stride, slow, dt)
+        state = eqx.tree_at(
+            lambda s: (s.stands, s.stand_heading, s.stride), state, (stands, still, stride)
+        )
     return state
 
 
@@ -461,13 +481,18 @@ def step(
     lod = _level_of_detail(cm, config, state, view)
     buckets = lod.buckets
     alive = state.alive
-    crowding, facing = jnp.zeros((), jnp.int32), None
+    crowding, facing, turning = jnp.zeros((), jnp.int32), None, None
     if config.avoid:  # first: the phase follows this step's walk (the root moves by v·dt)
         near = buckets.level <= config.blend_max_level
         vx, vz, facing, crowding = walk(config, world, state, near, dt, gather, ids)
+        slow = jnp.hypot(vx, vz) < STAND_BELOW
+        h, stood = state.heading, state.stand_heading
+        turning = turns_on_the_spot(state.stands, slow, h, stood, facing, dt)
         state = eqx.tree_at(lambda s: (s.vx, s.vz), state, (vx, vz))
     blending = _blending(cm, config, state, buckets, dt)
-    state, points, motion = _synthesis(cm, config, state, buckets, blending.rows, blending.feet, dt)
+    state, points, motion = _synthesis(
+        cm, config, state, buckets, blending.rows, blending.feet, dt, turning
+    )
     state = _move_roots(cm, config, state, alive, motion, dt, facing)
     state, deferred = schedule(cm, config, state, buckets.level < nlev, world)
     shown = jnp.where(alive, buckets.level, nlev)

@@ -74,7 +74,11 @@ def agent_motion(
     xz = np.asarray(recording["position"][:, agent], np.float64)
     fps = float(recording["fps"]) if "fps" in recording else 30.0
     motion = _motion(model, y, heading, xz, height, fps)
-    return _planted(model, motion, tau, height) if plant else motion
+    if not plant:
+        return motion
+    # The stride warp the step drew the agent with (recordings without it: none).
+    stride = recording["stride"][:, agent] if "stride" in recording else None
+    return _planted(model, motion, tau, height, heading, stride)
 
 
 def _motion(
@@ -113,9 +117,17 @@ def heel_strikes(model: MotionModel) -> tuple[float, float]:
     return float(np.argmax(apart)), float(np.argmin(apart))
 
 
-def _planted(model: MotionModel, motion: Motion, tau: np.ndarray, scale: float) -> Motion:
+def _planted(
+    model: MotionModel,
+    motion: Motion,
+    tau: np.ndarray,
+    scale: float,
+    heading: np.ndarray | None = None,
+    stride: np.ndarray | None = None,
+) -> Motion:
     """``motion`` with its feet planted frame by frame from no pins
-    (:func:`jcrowd.motion.planting.plant_sequence`), written back as joint rotations."""
+    (:func:`jcrowd.motion.planting.plant_sequence`, with the stride warp when ``stride`` is
+    given), written back as joint rotations."""
     skel = motion.skeleton
     feet = find_feet(skel)
     legs = leg_chains(
@@ -133,6 +145,8 @@ def _planted(model: MotionModel, motion: Motion, tau: np.ndarray, scale: float) 
         jnp.asarray(before, jnp.float32),
         jnp.asarray(tau, jnp.float32),
         jnp.float32(scale),
+        None if stride is None else jnp.asarray(heading, jnp.float32),
+        None if stride is None else jnp.asarray(stride, jnp.float32),
     )
     rot = planted_rotations(
         skel.parents,

@@ -50,12 +50,14 @@ __all__ = [
     "SEQUENCE_BLOCK",
     "SOFT_REACH",
     "STANCE_SHARE",
+    "STEPPING_HOLD",
     "Legs",
     "leg_chains",
     "plant_feet",
     "plant_sequence",
     "planted_rotations",
     "reach",
+    "warp_stride",
 ]
 
 STANCE_SHARE = 0.6
@@ -66,6 +68,12 @@ RELEASE_SHARE = 0.5
 
 MAX_SLIP = 0.1
 """The farthest a planted foot is held from its decoded place, per metre of skeleton scale."""
+
+STEPPING_HOLD = 0.25
+"""With the stride warped below 1 (:func:`warp_stride`) a planted foot is held up to
+``MAX_SLIP / max(stride, STEPPING_HOLD)``: four times as far standing or turning on the spot,
+where the body turns over a planted foot until the next step re-plants it (a turn of 60° swings
+a decoded toe 20 cm from the hip by 20 cm)."""
 
 POLE_WEIGHT = 0.05
 """How far (per thigh length) the knee's bend leans towards the toe: where the decoded knee sits
@@ -165,6 +173,8 @@ def plant_feet(
     pin: Float[Array, "2 2"],
     on: Bool[Array, " 2"],
     toe: Bool[Array, " 2"],
+    heading: Float[Array, ""] | None = None,
+    stride: Float[Array, ""] | float = 1.0,
 ) -> tuple[Array, Array, Array, Array]:
     """One agent's points with its stance feet planted, and its new ``(pin, on, toe)``.
 
@@ -172,7 +182,12 @@ def plant_feet(
     length in aligned frames; ``tau``: the phase the points are decoded at; ``scale``: the
     skeleton's scale (m). ``pin``: per foot ``(x, z)``, the pin while planted, the release
     offset while swinging; ``on``: planted in the last frame; ``toe``: the pin is the toe's.
+    ``heading`` and ``stride``: the stride warp (:func:`warp_stride`; none without a heading).
     """
+    if heading is not None:
+        points = warp_stride(legs, points, heading, stride)
+    # A foot stepping on the spot is held further: the body turns above it.
+    cap = MAX_SLIP * scale / jnp.maximum(jnp.asarray(stride, points.dtype), STEPPING_HOLD)
     length = STANCE_SHARE * last
     pins, ons, toes = [], [], []
     for f, (hip, knee, ankle, toe_j, below) in enumerate(legs):
@@ -184,7 +199,7 @@ def plant_feet(
         flagged = jnp.where(toe[f], points[toe_j, xz], points[ankle, xz])
         held = pin[f] - flagged
         n = jnp.linalg.norm(held)
-        held = held * jnp.minimum(1.0, MAX_SLIP * scale / jnp.maximum(n, 1e-9))
+        held = held * jnp.minimum(1.0, cap / jnp.maximum(n, 1e-9))
         release = jnp.where(on[f], held, pin[f])  # the offset kept over the swing
         delta = jnp.where(
             stance,
@@ -203,6 +218,22 @@ def plant_feet(
     return points, jnp.stack(pins), jnp.stack(ons), jnp.stack(toes)
 
 
+def warp_stride(
+    legs: Legs, points: Float[Array, "P 3"], heading: Float[Array, ""], stride: Array | float
+) -> Float[Array, "P 3"]:
+    """The decoded feet moved along the body's forward ``(sin θ, 0, cos θ)`` so that each
+    ankle's forward offset from its hip is ``stride`` times the decoded one (the ankle and the
+    points below it shift together; the knee is left to :func:`reach`): 1 keeps the decoded
+    walk, 0 puts the feet under the hips — a walker stepping on the spot, as one turning in
+    place does, or one standing."""
+    fwd = jnp.stack([jnp.sin(heading), 0.0, jnp.cos(heading)]).astype(points.dtype)
+    for hip, _, ankle, _, below in legs:
+        ahead = jnp.dot(points[ankle] - points[hip], fwd)
+        shift = -(1.0 - jnp.asarray(stride, points.dtype)) * ahead * fwd
+        points = points.at[np.asarray(below)].add(shift)
+    return points
+
+
 SEQUENCE_BLOCK = 256
 """:func:`plant_sequence` pads a clip to a multiple of this many frames, so clips of any length
 share a few compiled programs (one per length would fill memory over a crowd's agents)."""
@@ -215,15 +246,26 @@ def plant_sequence(
     points: Float[Array, "F P 3"],
     tau: Float[Array, " F"],
     scale: Float[Array, ""],
+    heading: Float[Array, " F"] | None = None,
+    stride: Float[Array, " F"] | None = None,
 ) -> Float[Array, "F P 3"]:
     """One agent's frames with its feet planted as the step plants them frame by frame (from no
-    pins): for a walker re-synthesized off line, drawn at a near level throughout."""
+    pins): for a walker re-synthesized off line, drawn at a near level throughout. ``heading``
+    and ``stride``: per frame, the stride warp (:func:`warp_stride`; none when not given)."""
     f = points.shape[0]
     size = -(-f // SEQUENCE_BLOCK) * SEQUENCE_BLOCK
-    # Frames repeated past the end: the scan is causal, so they change nothing before it.
-    pts = jnp.concatenate([points, jnp.repeat(points[-1:], size - f, axis=0)])
-    phases = jnp.concatenate([tau, jnp.repeat(tau[-1:], size - f)])
-    return _plant_scan(legs, stance_start, last, pts, phases, jnp.asarray(scale))[:f]
+
+    def padded(a: Array) -> Array:
+        # Frames repeated past the end: the scan is causal, so they change nothing before it.
+        return jnp.concatenate([a, jnp.repeat(a[-1:], size - f, axis=0)])
+
+    ones = jnp.ones(f, points.dtype)
+    warp = (
+        ones * 0.0 if heading is None else jnp.asarray(heading, points.dtype),
+        ones if stride is None else jnp.asarray(stride, points.dtype),
+    )
+    xs = (padded(points), padded(jnp.asarray(tau)), *map(padded, warp))
+    return _plant_scan(legs, stance_start, last, *xs, jnp.asarray(scale))[:f]
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2))
@@ -233,17 +275,19 @@ def _plant_scan(
     last: float,
     points: Array,
     tau: Array,
+    heading: Array,
+    stride: Array,
     scale: Array,
 ) -> Array:
     """:func:`plant_sequence` over a padded clip: one ``lax.scan`` of :func:`plant_feet`."""
 
-    def one(carry: tuple[Array, Array, Array], x: tuple[Array, Array]) -> tuple[Any, Array]:
-        p, t = x
-        out, *feet = plant_feet(legs, stance_start, last, p, t, scale, *carry)
+    def one(carry: tuple[Array, Array, Array], x: tuple[Array, ...]) -> tuple[Any, Array]:
+        p, t, h, k = x
+        out, *feet = plant_feet(legs, stance_start, last, p, t, scale, *carry, h, k)
         return tuple(feet), out
 
     start = (jnp.zeros((2, 2), points.dtype), jnp.zeros(2, bool), jnp.zeros(2, bool))
-    _, out = jax.lax.scan(one, start, (points, tau))
+    _, out = jax.lax.scan(one, start, (points, tau, heading, stride))
     return out
 
 
