@@ -95,7 +95,7 @@ from jcrowd.model import agent_motion, foot_skate
 from jcrowd.motion.clip import joint_positions
 from jcrowd.motion.footlock import slides_of_points
 from jcrowd.motion.gait import find_feet
-from jcrowd.motion.planting import plant_sequence
+from jcrowd.motion.planting import plant_sequence, warp_stride
 from jcrowd.motion.skeleton import rest_positions
 from jcrowd.render.camera import View, project
 from jcrowd.scenario import load_scenario
@@ -176,11 +176,26 @@ def _planted(model, cm, rec: dict, agent: int, joints: np.ndarray, a: int, b: in
     return np.asarray(planted)[:, :j]
 
 
+def _warped(cm, rec: dict, agent: int, span: tuple[int, int], joints: np.ndarray) -> np.ndarray:
+    """``joints (F, J, 3)`` with the stride warp the step drew every level with
+    (:func:`jcrowd.motion.planting.warp_stride`; unchanged for recordings without it)."""
+    if "stride" not in rec:
+        return joints.copy()
+    a, b = span
+    j = joints.shape[1]
+    size = max(max(leg[4]) for leg in cm.legs) + 1  # the legs' End Sites follow the joints
+    pts = np.concatenate([joints, np.zeros((len(joints), max(size - j, 0), 3), joints.dtype)], 1)
+    warp = jax.vmap(lambda p, h, k: warp_stride(cm.legs, p, h, k))
+    heading, stride = rec["heading"][a:b, agent], rec["stride"][a:b, agent]
+    out = warp(jnp.asarray(pts), jnp.asarray(heading, jnp.float32), jnp.asarray(stride))
+    return np.asarray(out)[:, :j]
+
+
 def planted_in_runs(model, cm, rec, agent, span, loose, near) -> np.ndarray:
     """The level-0 joints ``loose`` planted as the step plants this agent: from fresh pins at
     the start of each run of frames it is drawn near (``near (F,)``), as the step's pins start
     when an agent comes near; ``loose`` elsewhere."""
-    out = loose.copy()
+    out = _warped(cm, rec, agent, span, loose)
     edges = np.diff(np.concatenate([[0], near.astype(int), [0]]))
     for r0, r1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True):
         a, b = span[0] + r0, span[0] + r1

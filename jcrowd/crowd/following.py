@@ -65,9 +65,10 @@ on the spot (:func:`turns_on_the_spot`). Game rigs re-plant after 45° or so; ou
 because a planted foot is moved, not turned, so its heel or toe swings round the pin with the
 body until the step re-plants it."""
 
-TURNING_DEG_S = 10.0
+TURNING_DEG_S = 30.0
 """A slow agent between two double supports whose body turns faster than this (°/s) finishes
-its step at :data:`TURN_CADENCE`, not at :data:`STAND_APPROACH`."""
+its step at :data:`TURN_CADENCE`, not at :data:`STAND_APPROACH` (a standing body turns at up
+to 69°/s, :mod:`jcrowd.pedestrians.heading`; slower turns are a body settling)."""
 
 TURN_CADENCE = 1.0
 """A step on the spot runs at this fraction of the model's mean cadence: half a cycle, one

@@ -65,7 +65,7 @@ from jcrowd.crowd.state import CrowdState, Frame, StepConfig, refresh_far_cores
 from jcrowd.crowd.steering import walk
 from jcrowd.crowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
 from jcrowd.motion.fastmath import sincos
-from jcrowd.motion.planting import plant_feet
+from jcrowd.motion.planting import plant_feet, warp_stride
 from jcrowd.pedestrians.heading import smoothstep
 from jcrowd.pedestrians.world import World
 
@@ -112,6 +112,7 @@ def _agent_level(
     cached: bool = False,
     follow: bool = False,
     turning: Array | None = None,
+    warp: bool = False,
 ):
     """Pose and root motion of agent ``i`` at ``level`` (one agent; batched by ``vmap``).
 
@@ -120,7 +121,8 @@ def _agent_level(
     ``far_core`` (the coarsest level, kept current by
     :func:`jcrowd.crowd.state.refresh_far_cores`). ``follow``: the phase advances with the
     distance the agent walks (:func:`~jcrowd.crowd.following.follow_phase`); ``turning``: the
-    agents stepping on the spot (:func:`~jcrowd.crowd.following.turns_on_the_spot`).
+    agents stepping on the spot (:func:`~jcrowd.crowd.following.turns_on_the_spot`); ``warp``:
+    the feet take the agent's stride warp (:func:`~jcrowd.motion.planting.warp_stride`).
     """
     lv = cm.decoders.levels[level]
     last = float(cm.frames - 1)
@@ -141,6 +143,8 @@ def _agent_level(
     xz = jnp.stack([state.x[i], state.z[i]])
     y = pose(tau)
     pts = level_points(lv, y, xz, heading, h)
+    if warp:
+        pts = warp_stride(cm.legs, pts, heading, state.stride[i])
     rates = root_rates(y)
     dtau = dt * cm.decoders.fps / rates.delta_a
     if follow:
@@ -291,7 +295,8 @@ def _blending(
         safe = jnp.where(ids < state.num_agents, ids, 0)
 
         def one(i: Array) -> Array:
-            return _agent_level(cm, a, near, False, state, i, dt, follow=config.avoid)[0]
+            warp = plants_feet(cm, config)
+            return _agent_level(cm, a, near, False, state, i, dt, follow=config.avoid, warp=warp)[0]
 
         chunk = bucket_chunk(ids.shape[0], config.chunk, cm.decoders.levels[a].cores.shape[1])
         pts = decode_bucket(jax.vmap(one), safe, used, chunk)
@@ -346,7 +351,7 @@ def _synthesis(
 
         def one(i, lv=lv, near=near, lock=lock, cached=cached, state=state, ease=in_decode):
             pts, *motion = _agent_level(
-                cm, lv, near, lock, state, i, dt, cached, config.avoid, turning
+                cm, lv, near, lock, state, i, dt, cached, config.avoid, turning, plant
             )
             return (blend.ease(i, pts) if ease else pts, *motion)
 
@@ -403,7 +408,7 @@ def _plant(
             state.pin[i],
             state.planted[i],
             state.pin_toe[i],
-            state.heading[i],
+            None,  # the decoded points are warped already (_agent_level)
             state.stride[i],
         )
 
