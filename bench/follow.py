@@ -188,7 +188,7 @@ def _warped(cm, rec: dict, agent: int, span: tuple[int, int], joints: np.ndarray
     warp = jax.vmap(lambda p, h, k: warp_stride(cm.legs, p, h, k))
     heading, stride = rec["heading"][a:b, agent], rec["stride"][a:b, agent]
     out = warp(jnp.asarray(pts), jnp.asarray(heading, jnp.float32), jnp.asarray(stride))
-    return np.asarray(out)[:, :j]
+    return np.array(out)[:, :j]
 
 
 def planted_in_runs(model, cm, rec, agent, span, loose, near) -> np.ndarray:
