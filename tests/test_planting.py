@@ -173,6 +173,29 @@ def test_a_stride_warp_scales_the_feet_forward_offset_from_the_hips(heading, str
     np.testing.assert_allclose(body, want, atol=2e-6)
 
 
+def test_stride_warp_transforms():
+    """warp_stride and plant_feet with a warp: jit == eager, and vmap over agents == a loop."""
+    legs = leg_chains(PARENTS, FEET)
+    pts, tau = _walker(3, 0.0)
+    pts[:, [3, 4, 9], 2] += np.array([0.3, -0.2, 0.1])[:, None]
+    heading = jnp.array([0.3, -2.0, 3.0], jnp.float32)
+    stride = jnp.array([0.0, 0.4, 1.0], jnp.float32)
+    carry = (jnp.zeros((2, 2)), jnp.zeros(2, bool), jnp.zeros(2, bool))
+
+    def one(p, t, h, k):
+        return plant_feet(legs, START, LAST, p, t, jnp.float32(1.0), *carry, h, k)
+
+    batched = jax.vmap(one)(jnp.asarray(pts), jnp.asarray(tau), heading, stride)
+    jitted = jax.jit(one)
+    for i in range(3):
+        args = (jnp.asarray(pts[i]), jnp.asarray(tau[i]), heading[i], stride[i])
+        with jax.disable_jit():
+            eager = one(*args)
+        for b, j, e in zip(batched, jitted(*args), eager, strict=True):
+            np.testing.assert_allclose(b[i], e, atol=1e-6)
+            np.testing.assert_allclose(j, e, atol=1e-6)
+
+
 def test_planting_transforms():
     """The scanned sequence == the per-frame step in a Python loop, eager; jit == eager for
     one frame; and vmap over agents == a loop."""
