@@ -18,7 +18,8 @@
    the dynamics, with the distance walked (:func:`~jcrowd.crowd.following.follow_phase`).
    Culled agents advance their root only, by dead reckoning along their clip's arc (000 §4.3).
 5. **Root motion**: by ``v·dt`` with the dynamics (the body facing the dynamics' heading;
-   below 0.1 m/s the agent stands at a double-support phase), else by
+   below 0.1 m/s the agent stands at a double-support phase, and steps on the spot when its
+   body has turned, :func:`~jcrowd.crowd.following.turns_on_the_spot`), else by
    the decoded motion, with the stance foot locked near the camera.
 6. **Clips** (:mod:`jcrowd.crowd.schedule`): waypoints, the next cycle chosen at mid-cycle
    (bounded per step, kriged for synthesized agents), the hand-over at the cycle's end.
