@@ -123,7 +123,9 @@ def _agent_level(
     :func:`jcrowd.crowd.state.refresh_far_cores`). ``follow``: the phase advances with the
     distance the agent walks (:func:`~jcrowd.crowd.following.follow_phase`); ``turning``: the
     agents stepping on the spot (:func:`~jcrowd.crowd.following.turns_on_the_spot`); ``warp``:
-    the feet take the agent's stride warp (:func:`~jcrowd.motion.planting.warp_stride`).
+    the feet take the agent's stride warp (:func:`~jcrowd.motion.planting.warp_stride`; the
+    the planted levels only: the coarser levels hold most agents, small on screen, and a warp
+    per agent there costs more of the step than it shows).
     """
     lv = cm.decoders.levels[level]
     last = float(cm.frames - 1)
@@ -296,7 +298,7 @@ def _blending(
         safe = jnp.where(ids < state.num_agents, ids, 0)
 
         def one(i: Array) -> Array:
-            warp = plants_feet(cm, config)
+            warp = near and plants_feet(cm, config)
             return _agent_level(cm, a, near, False, state, i, dt, follow=config.avoid, warp=warp)[0]
 
         chunk = bucket_chunk(ids.shape[0], config.chunk, cm.decoders.levels[a].cores.shape[1])
@@ -352,7 +354,7 @@ def _synthesis(
 
         def one(i, lv=lv, near=near, lock=lock, cached=cached, state=state, ease=in_decode):
             pts, *motion = _agent_level(
-                cm, lv, near, lock, state, i, dt, cached, config.avoid, turning, plant
+                cm, lv, near, lock, state, i, dt, cached, config.avoid, turning, near and plant
             )
             return (blend.ease(i, pts) if ease else pts, *motion)
 
