@@ -163,6 +163,17 @@ def test_double_support_phases_are_where_the_ankles_are_furthest_apart(model, si
     assert 0.3 * last < (second - first) % last < 0.7 * last
 
 
+def _drawn(frame) -> dict:
+    """Each drawn agent's points in a frame, by agent id."""
+    drawn = {}
+    for lv in range(len(frame.points)):
+        ok = np.asarray(frame.valid[lv])
+        slots, pts = np.asarray(frame.slots[lv])[ok], np.asarray(frame.points[lv])[ok]
+        for a, p in zip(slots, pts, strict=True):
+            drawn[int(a)] = p
+    return drawn
+
+
 def test_a_standing_agent_keeps_its_feet_still_and_moves_without_jumps(sim_state):
     """Free speed 2 cm/s: every agent slows below STAND_BELOW, walks on to a double-support
     phase and stands. Its drawn feet then move no more than its root creeps (2 cm/s: 0.067 cm
@@ -176,12 +187,7 @@ def test_a_standing_agent_keeps_its_feet_still_and_moves_without_jumps(sim_state
     prev, prev_stands, standing_frames, worst_jump = None, None, 0, 0.0
     for i in range(90):
         new, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
-        drawn = {}
-        for lv in range(len(frame.points)):
-            ok = np.asarray(frame.valid[lv])
-            slots, pts = np.asarray(frame.slots[lv])[ok], np.asarray(frame.points[lv])[ok]
-            for a, p in zip(slots, pts, strict=True):
-                drawn[int(a)] = p
+        drawn = _drawn(frame)
         stands = np.asarray(state.stands)
         if prev is not None:
             for a, p in drawn.items():
@@ -283,12 +289,7 @@ def test_a_standing_body_turns_on_the_spot_by_stepping(sim_state):
             wp = np.repeat(behind[:, None], state.waypoints.shape[1], axis=1)
             state = replace(state, waypoints=jnp.asarray(wp, jnp.float32))
         new, frame = fn(state, sim.view_at(i * sim.dt), sim.dt)
-        drawn = {}
-        for lv in range(len(frame.points)):
-            ok = np.asarray(frame.valid[lv])
-            slots, pts = np.asarray(frame.slots[lv])[ok], np.asarray(frame.points[lv])[ok]
-            for a, p in zip(slots, pts, strict=True):
-                drawn[int(a)] = p
+        drawn = _drawn(frame)
         on, toe = np.asarray(new.planted), np.asarray(new.pin_toe)
         if prev is not None and i > 45:
             was = np.asarray(prev_state.planted)
