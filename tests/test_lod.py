@@ -10,6 +10,7 @@ import pytest
 from jcrowd.crowd import (
     CameraView,
     assign_buckets,
+    default_capacities,
     distance_levels,
     in_frustum,
     screen_height_px,
@@ -96,6 +97,36 @@ def test_unconstrained_branch_equals_greedy_fill_when_everything_fits(seed):
     small = (int(counts[0]) - 3, *caps[1:])
     got = assign_buckets(min_level, jnp.asarray(rng.normal(size=n)), eligible, small)
     assert int(got.overflow) + int(got.unplaced) >= 3
+
+
+@pytest.mark.parametrize(
+    ("agents", "caps"),
+    [
+        (90, (90,) * 6),  # a small crowd fits every level whole
+        (256, (256,) * 6),
+        (1_000, (256, 256, 256, 256, 1_000 // 4 + 64, 1_000)),  # level 4's share passes 256
+        (10_000, (256, 10_000 // 32 + 64, 10_000 // 16 + 64, 10_000 // 8 + 64, 2_564, 10_000)),
+        (10**6, (256, 512, 1_024, 2_048, 4_096, 16_384)),  # the fixed budget
+    ],
+)
+def test_default_budget_by_hand(agents, caps):
+    """The default capacities worked out by hand: at least 256 per level (everyone in a small
+    crowd, so a few dozen people near the camera are never pushed to level 1), a share of a
+    medium crowd, the fixed budget of a large one."""
+    assert default_capacities(agents, 6) == caps
+
+
+@pytest.mark.parametrize("agents", [1, 7, 90, 300, 5_000, 70_000, 3 * 10**6])
+@pytest.mark.parametrize("levels", [2, 4, 6])
+def test_default_budget_properties(agents, levels):
+    """Every level holds at most the crowd and at least a level before it, and a crowd that
+    fits level 0 fits every level."""
+    caps = default_capacities(agents, levels)
+    assert len(caps) == levels
+    assert all(0 < c <= agents for c in caps)
+    assert list(caps) == sorted(caps)
+    if caps[0] == agents:
+        assert set(caps) == {agents}
 
 
 def test_budget_small_capacity_most_important_get_level_zero_none_dropped():

@@ -10,7 +10,8 @@
    pedestrian step of :mod:`jcrowd.pedestrians` gives each agent its velocity. It runs before
    the synthesis, so the phase follows the velocity the root walks in the same step.
 3. **Level blending** (:mod:`jcrowd.crowd.level_blend`): an agent whose level changed eases
-   from the old level's pose to the new one's over 0.3 s; the old level is decoded here.
+   from the old level's pose to the new one's over 0.45 s, continuous in value and velocity;
+   the old level is decoded here.
 4. **Synthesis** per level (:mod:`jcrowd.crowd.synthesis`), ``vmap`` over the level's bucket,
    run only on the chunks of slots that hold agents (:func:`decode_bucket`): the pose at phase
    τ, blended with the next clip for levels ≤ ``blend_max_level``, FK on the level's
@@ -86,18 +87,23 @@ BUDGET_LAST = 16_384
 
 
 def default_capacities(agents: int, levels: int) -> tuple[int, ...]:
-    """The default budget: level l < L − 1 holds ``min(N / 2^(L − l) + 64, 256 · 2^l)``
-    agents, the last ``min(N, 16,384)``.
+    """The default budget: level l < L − 1 holds ``min(max(N / 2^(L − l) + 64, 256),
+    256 · 2^l)`` agents, the last 16,384; none holds more than the crowd's ``N``.
 
-    A share of a small crowd, a fixed budget for a large one: the screen holds only so many agents
-    tall enough to show detail, and every slot costs a decode whether used or not. On
-    ``bench/step.py``'s plaza (1280×720, 1 agent per 10 m², 3-pixel detail culling) a few hundred
-    agents sit at each of the levels 0–4 and most synthesized ones at level 5, at 100k and at 1M
-    agents alike (its level histogram shows it). Dense scenes close to the camera overflow coarser
-    (counted), never vanish.
+    A fixed budget for a large crowd, everyone for a small one: the screen holds only so many
+    agents tall enough to show detail, so level 0's 256 slots are never full on
+    ``bench/step.py``'s plaza (1280×720, 1 agent per 10 m², 3-pixel detail culling: its level
+    histogram holds about a hundred agents at each of the levels 0–4 and most synthesized ones
+    at level 5, at 100k and at 1M agents alike). A crowd of up to 256 agents fits every level
+    whole, so no agent of it is drawn coarser than its distance asks: a scene with a few dozen
+    people close to the camera shows them all at full detail, where a share of the crowd would
+    move some to level 1 a few metres from the camera (a visible pose change, and a level-1
+    pose's own error at that distance is a few pixels per frame). Denser scenes overflow
+    coarser (counted), never vanish.
     """
     caps = [
-        min(agents // 2 ** (levels - lv) + 64, BUDGET_FINEST * 2**lv) for lv in range(levels - 1)
+        min(max(agents // 2 ** (levels - lv) + 64, BUDGET_FINEST), BUDGET_FINEST * 2**lv)
+        for lv in range(levels - 1)
     ]
     return tuple(min(agents, c) for c in (*caps, BUDGET_LAST))
 
