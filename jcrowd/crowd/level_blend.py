@@ -60,7 +60,7 @@ BLEND_SECONDS = 0.45
 frame is a linear 0.3 s ramp's."""
 
 
-def blend_weight(left: Float[Array, "..."]) -> Float[Array, "..."]:
+def blend_weight(left: Float[Array, "*n"]) -> Float[Array, "*n"]:
     """``w = S(left / BLEND_SECONDS)``: the old level's share with ``left`` seconds of the
     blend to go (1 at the change, 0 at the end, zero slope at both)."""
     return smoothstep(left / BLEND_SECONDS)
