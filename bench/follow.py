@@ -34,7 +34,8 @@ recording (skate and pops over each agent slot's first life, :func:`alive_span`)
   joint jump beyond what the same agent re-synthesized at level 0 moves in the same frame
   (``max_j |Δp_j − Δp⁰_j|``, cm), over the frame of the change and the frames the step eases
   the change over (:data:`~jcrowd.crowd.level_blend.BLEND_SECONDS`; until the next change),
-  and that ÷ the agent's median per-frame joint motion (``median_f max_j |Δp_j|``);
+  and that ÷ the agent's median per-frame joint motion (``median_f max_j |Δp_j|``); ``None``
+  ("—") where no drawn agent changed level;
   ``steady_jump_cm`` (p99) the same jump in drawn frames with no level change near: what the
   coarser levels move beyond level 0 on their own. Frames where the phase wraps (the cycle
   hands over to the next clip) are left out of both and measured apart, ``wrap_jump_cm``
@@ -580,7 +581,8 @@ def main() -> None:
             f"{r['heading_deviation_deg']['p99']} | {r['skate_cm_per_frame']} "
             f"({r['skate_ratio']}×) | {r['slow_share']} | {r['standing_share']} | "
             f"{_or_dash(r['standing_skate_cm_per_frame'])} | {r['walking_in_place_share']} | "
-            f"{r['level_changes']} | {r['pop_cm']} | {r['pop_ratio']} | {r['steady_jump_cm']} | "
+            f"{r['level_changes']} | {_or_dash(r['pop_cm'])} | {_or_dash(r['pop_ratio'])} | "
+            f"{r['steady_jump_cm']} | "
             f"{r['wrap_jump_cm']} / {r['wrap_jump_level0_cm']} |"
         )
     text = "\n".join(rows) + f"\n\ncmu16 captures' own skate: {ref:.3f} cm/frame"
@@ -596,7 +598,7 @@ def main() -> None:
             f"| {name} | {_or_dash(r['skate_drawn_level0_cm_per_frame'])} "
             f"({_or_dash(r['skate_drawn_level0_ratio'])}×) | {lb['p95']} / {lb['p99']} | "
             f"{r['body_turn_rate_deg_s']} | "
-            f"{_or_dash(r['standing_facing_deg'])} | {r['pop_px']} | {r['steady_px']} |\n"
+            f"{_or_dash(r['standing_facing_deg'])} | {_or_dash(r['pop_px'])} | {r['steady_px']} |\n"
         )
     if "entrance" in out:
         q = out["entrance"]["queue_motion"]
