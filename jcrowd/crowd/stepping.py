@@ -358,19 +358,30 @@ def _synthesis(
         # rows afterwards (level_blend.BlendRows).
         in_decode = lv < nlev - 1
 
-        def one(i, lv=lv, near=near, lock=lock, cached=cached, state=state, ease=in_decode):
+        # Near agents are planted in their decode too (in the chunks that run), but for the
+        # last bucket, eased after its decode.
+        planted = near and plant and in_decode
+
+        def one(
+            i, lv=lv, near=near, lock=lock, cached=cached, state=state, ease=in_decode, pl=planted
+        ):
             pts, *motion = _agent_level(
                 cm, lv, near, lock, state, i, dt, cached, config.avoid, turning, near and plant
             )
-            return (blend.ease(i, pts) if ease else pts, *motion)
+            pts = blend.ease(i, pts) if ease else pts
+            if pl:
+                pts, *feet = _plant_agent(cm, state, i, pts)
+                return (pts, *motion, *feet)
+            return (pts, *motion)
 
         used = jnp.sum(ok, dtype=jnp.int32)
         chunk = bucket_chunk(len(slots), config.chunk, cm.decoders.levels[lv].cores.shape[1])
-        pts, t_l, yaw_l, pos_l = decode_bucket(jax.vmap(one), safe, used, chunk)
+        pts, t_l, yaw_l, pos_l, *feet = decode_bucket(jax.vmap(one), safe, used, chunk)
         if not in_decode:
             pts = blend.ease_bucket(pts, sum(len(s) for s in buckets.slots[:lv]))
+            if near and plant:
+                pts, feet = _plant(cm, state, safe, pts)
         if near and plant:
-            pts, feet = _plant(cm, state, safe, pts)
             feet_out = [
                 o.at[slots].set(v, mode="drop") for o, v in zip(feet_out, feet, strict=True)
             ]
@@ -398,30 +409,31 @@ def _no_pins(state: CrowdState) -> tuple[Array, Array, Array]:
     )
 
 
+def _plant_agent(
+    cm: CrowdModel, state: CrowdState, i: Array, pts: Array
+) -> tuple[Array, Array, Array, Array]:
+    """Agent ``i``'s points with its stance feet planted (:mod:`jcrowd.motion.planting`), and
+    its new pins, planted and toe flags."""
+    return plant_feet(
+        cm.legs,
+        (float(cm.double_support[0]), float(cm.double_support[1])),
+        float(cm.frames - 1),
+        pts,
+        state.tau[i],
+        state.height[i],
+        state.pin[i],
+        state.planted[i],
+        state.pin_toe[i],
+        None,  # the decoded points are warped already (_agent_level)
+        state.stride[i],
+    )
+
+
 def _plant(
     cm: CrowdModel, state: CrowdState, ids: Array, pts: Array
 ) -> tuple[Array, tuple[Array, Array, Array]]:
-    """A near bucket's points with their stance feet planted (:mod:`jcrowd.motion.planting`),
-    and its agents' new pins."""
-    last = float(cm.frames - 1)
-    start = (float(cm.double_support[0]), float(cm.double_support[1]))
-
-    def one(p: Array, i: Array) -> tuple[Array, Array, Array, Array]:
-        return plant_feet(
-            cm.legs,
-            start,
-            last,
-            p,
-            state.tau[i],
-            state.height[i],
-            state.pin[i],
-            state.planted[i],
-            state.pin_toe[i],
-            None,  # the decoded points are warped already (_agent_level)
-            state.stride[i],
-        )
-
-    out, pin, on, toe = jax.vmap(one)(pts, ids)
+    """A bucket's points with their stance feet planted, and its agents' new pins."""
+    out, pin, on, toe = jax.vmap(lambda i, p: _plant_agent(cm, state, i, p))(ids, pts)
     return out, (pin, on, toe)
 
 
