@@ -326,7 +326,7 @@ def _run_constants(sim: Any, nlev: int) -> dict[str, np.ndarray]:
     the level count, whether near agents' feet were planted (``planted``: ``jcrowd export``
     plants them alike) and, with a layout, the obstacles' prisms (drawn by ``jcrowd render``)."""
     from jcrowd.cli.runloop import scenario_obstacles
-    from jcrowd.crowd.stepping import plants_feet
+    from jcrowd.crowd.feet import plants_feet
 
     cam = sim.scenario.camera
     out = {

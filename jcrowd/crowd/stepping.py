@@ -45,6 +45,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Int
 
 from jcrowd.crowd.clips import CrowdModel, local_to_world
+from jcrowd.crowd.feet import no_pins, plant_agent, plant_bucket, plants_feet
 from jcrowd.crowd.following import (
     STAND_BELOW,
     follow_phase,
@@ -67,7 +68,7 @@ from jcrowd.crowd.state import CrowdState, Frame, StepConfig, refresh_far_cores
 from jcrowd.crowd.steering import walk
 from jcrowd.crowd.synthesis import clip_core, coeffs_at, level_points, pose_from_coeffs, root_rates
 from jcrowd.motion.fastmath import sincos
-from jcrowd.motion.planting import plant_feet, warp_stride
+from jcrowd.motion.planting import warp_stride
 from jcrowd.pedestrians.heading import smoothstep
 from jcrowd.pedestrians.world import World
 
@@ -75,7 +76,6 @@ __all__ = [
     "bucket_chunk",
     "decode_bucket",
     "default_capacities",
-    "plants_feet",
     "step",
 ]
 
@@ -296,7 +296,7 @@ def _blending(
         state.shown, state.blend_from, state.blend_left, buckets.level, state.alive, nlev
     )
 
-    feet = _no_pins(state)
+    feet = no_pins(state)
 
     def old_pose(a: int, ids: Array, used: Array) -> Array:
         nonlocal feet
@@ -314,7 +314,7 @@ def _blending(
             # slid to: its old pose is planted as it was drawn, its pins carried on. (One going
             # to another near level is planted after the easing, with the same pins.)
             leaving = buckets.level[safe] > config.blend_max_level
-            planted, new = _plant(cm, state, safe, pts)
+            planted, new = plant_bucket(cm, state, safe, pts)
             pts = jnp.where(leaving[:, None, None], planted, pts)
             to = jnp.where(leaving, ids, state.num_agents)
             pin, on, toe = (o.at[to].set(v, mode="drop") for o, v in zip(feet, new, strict=True))
@@ -370,7 +370,7 @@ def _synthesis(
             )
             pts = blend.ease(i, pts) if ease else pts
             if pl:
-                pts, *feet = _plant_agent(cm, state, i, pts)
+                pts, *feet = plant_agent(cm, state, i, pts)
                 return (pts, *motion, *feet)
             return (pts, *motion)
 
@@ -380,7 +380,7 @@ def _synthesis(
         if not in_decode:
             pts = blend.ease_bucket(pts, sum(len(s) for s in buckets.slots[:lv]))
             if near and plant:
-                pts, feet = _plant(cm, state, safe, pts)
+                pts, feet = plant_bucket(cm, state, safe, pts)
         if near and plant:
             feet_out = [
                 o.at[slots].set(v, mode="drop") for o, v in zip(feet_out, feet, strict=True)
@@ -393,48 +393,6 @@ def _synthesis(
     if plant:
         state = eqx.tree_at(lambda s: (s.pin, s.planted, s.pin_toe), state, tuple(feet_out))
     return state, points, (dtau, dyaw, dx, dz)
-
-
-def plants_feet(cm: CrowdModel, config: StepConfig) -> bool:
-    """Whether the step plants near agents' feet (:mod:`jcrowd.motion.planting`)."""
-    return config.avoid and config.foot_lock and config.plant_feet and bool(cm.legs)
-
-
-def _no_pins(state: CrowdState) -> tuple[Array, Array, Array]:
-    """Pins, planted and toe flags of nobody planted."""
-    return (
-        jnp.zeros_like(state.pin),
-        jnp.zeros_like(state.planted),
-        jnp.zeros_like(state.pin_toe),
-    )
-
-
-def _plant_agent(
-    cm: CrowdModel, state: CrowdState, i: Array, pts: Array
-) -> tuple[Array, Array, Array, Array]:
-    """Agent ``i``'s points with its stance feet planted (:mod:`jcrowd.motion.planting`), and
-    its new pins, planted and toe flags."""
-    return plant_feet(
-        cm.legs,
-        (float(cm.double_support[0]), float(cm.double_support[1])),
-        float(cm.frames - 1),
-        pts,
-        state.tau[i],
-        state.height[i],
-        state.pin[i],
-        state.planted[i],
-        state.pin_toe[i],
-        None,  # the decoded points are warped already (_agent_level)
-        state.stride[i],
-    )
-
-
-def _plant(
-    cm: CrowdModel, state: CrowdState, ids: Array, pts: Array
-) -> tuple[Array, tuple[Array, Array, Array]]:
-    """A bucket's points with their stance feet planted, and its agents' new pins."""
-    out, pin, on, toe = jax.vmap(lambda i, p: _plant_agent(cm, state, i, p))(ids, pts)
-    return out, (pin, on, toe)
 
 
 def _move_roots(
