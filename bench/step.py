@@ -3,8 +3,13 @@
 Plaza made in code: N agents uniformly in a square at 1 agent per 10 m², each walking to a
 random point of the square, camera at the near edge 1.7 m high looking across, 60° vertical
 fov, 1280×720, the shipped default model and the default LOD budget. Columns: compile s,
-ms/step (median over steps after warm-up, ``block_until_ready``), agent-steps/s, the mean level
-histogram (last = culled), bytes of state per agent.
+ms/step (median over steps after warm-up, ``block_until_ready``), the same in K-step calls
+(``Simulation.compiled_steps``, ``--chunk`` frames per call, default 30, recording each frame's
+levels and dots as the single-step loop reads them; a call's time ÷ its frames, median over
+calls alternated with as many single steps, and its ratio to the single step),
+``kernels_per_step`` (top-level operations of the compiled single step's optimized HLO on this
+device kind: :func:`kernels_per_step`), agent-steps/s, the mean level histogram (last = culled),
+bytes of state per agent.
 
 In the same run, on the same agents:
 
@@ -35,14 +40,15 @@ With ``--avoid`` the plaza has ``[dynamics] avoid = true``: every agent's root i
 avoidance model (``--model``, default ``anticipation``) among its neighbours
 (:mod:`jcrowd.crowd.steering`) — the whole step with crowd dynamics; the row says so.
 
-``python bench/step.py [--agents 1000,100000] [--cpu-devices K] [--avoid] [--json]``; appends a
-row to bench/RESULTS.md.
+``python bench/step.py [--agents 1000,100000] [--cpu-devices K] [--avoid] [--chunk 30]
+[--json]``; appends a row to bench/RESULTS.md.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import time
 from dataclasses import replace
@@ -65,6 +71,7 @@ from jcrowd.crowd import (
     prepare,
     shard_state,
 )
+from jcrowd.crowd.devices import on_all_devices
 from jcrowd.model import MotionModel, PoseLayout
 from jcrowd.motion import forward_kinematics, quat_from_expmap, quat_mul, yaw_quat
 from jcrowd.scenario import parse_scenario
@@ -197,6 +204,51 @@ def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
     return n / (_median_ms(lambda: f(*args), repeats) * 1e-3)
 
 
+def _counted(state: Any, view: Any, frame: Any) -> dict[str, Any]:
+    """What the K-step calls keep of each frame: what the single-step loop reads back."""
+    return {"level": frame.level, "dots": frame.dots}
+
+
+HLO_PLUMBING = frozenset(("parameter", "constant", "tuple", "get-tuple-element", "bitcast"))
+"""HLO instructions that launch no work: not counted as kernels."""
+
+
+def kernels_per_step(hlo: str) -> int:
+    """Top-level operations of a compiled step's optimized HLO (``compile().as_text()``): the
+    instructions of the entry computation and of the computations it runs as control flow
+    (``while`` bodies and conditions, ``conditional`` branches), fusions counted once and the
+    computations inside fusions, reductions and sorts not at all; :data:`HLO_PLUMBING` left
+    out. Each is a kernel the device launches (a while body's once per iteration; counted
+    once here)."""
+    computations: dict[str, list[str]] = {}
+    entry, name = "", None
+    for line in hlo.splitlines():
+        head = re.match(r"^(ENTRY )?%?([\w.\-]+) .*\{$", line)
+        if head:
+            name = head.group(2)
+            computations[name] = []
+            entry = name if head.group(1) else entry
+        elif line == "}":
+            name = None
+        elif name is not None:
+            computations[name].append(line)
+    control: set[str] = set()
+    for lines in computations.values():
+        for line in lines:
+            if " while(" in line:
+                control.update(re.findall(r"(?:body|condition)=%?([\w.\-]+)", line))
+            branches = re.search(r"branch_computations=\{([^}]*)\}", line)
+            if branches:
+                control.update(b.strip().lstrip("%") for b in branches.group(1).split(","))
+            control.update(re.findall(r"(?:true|false)_computation=%?([\w.\-]+)", line))
+    count = 0
+    for comp in [entry, *sorted(control)]:
+        for line in computations.get(comp, []):
+            op = re.match(r"\s*(?:ROOT )?%?[\w.\-]+ = .*? ([a-z][\w\-]*)\(", line)
+            count += bool(op) and op.group(1) not in HLO_PLUMBING  # type: ignore[union-attr]
+    return count
+
+
 def roof_bytes(state: Any, frame: Any, refresh: int) -> int:
     """Bytes a step must read and write (module doc)."""
     n = state.num_agents
@@ -220,6 +272,7 @@ def run_count(
     far_every: int = 1,
     dynamics_model: str = "anticipation",
     full_detail: bool = False,
+    chunk: int = 30,
 ) -> dict[str, Any]:
     """One plaza of ``n`` walkers; ``full_detail`` turns the LOD off: every agent in view is
     synthesized at level 0 (one bucket holding all, thresholds out of reach, no dots), the
@@ -247,16 +300,27 @@ def run_count(
     t = time.perf_counter()
     jax.block_until_ready(fn(jax.tree.map(jnp.copy, state), view, dt))  # state is donated
     compile_s = time.perf_counter() - t
+    kernels = kernels_per_step(fn.lower(state, view, dt).compile().as_text())
+    many = sim.compiled_steps(chunk, _counted)
+    views, count = sim.views(0, chunk), on_all_devices(jnp.asarray(chunk, jnp.int32))
+    k_state = jax.tree.map(jnp.copy, state)
+    k_state, _ = jax.block_until_ready(many(k_state, views, dt, count))  # compiles
     for _ in range(3):  # warm-up: past the first clip choices
         state, frame = fn(state, view, dt)
-    times, hist, dots = [], np.zeros(len(sim.config.capacities) + 1), 0
-    for _ in range(steps):
+    times, k_times, hist, dots = [], [], np.zeros(len(sim.config.capacities) + 1), 0
+    for _ in range(max(3, -(-steps // chunk))):  # alternated: `chunk` single steps, one K-step call
+        for _ in range(chunk):
+            t = time.perf_counter()
+            state, frame = fn(state, view, dt)
+            jax.block_until_ready(state)
+            times.append(time.perf_counter() - t)
+            hist += np.bincount(np.asarray(frame.level), minlength=len(hist))
+            dots += int(np.asarray(frame.dots).sum())
         t = time.perf_counter()
-        state, frame = fn(state, view, dt)
-        jax.block_until_ready(state)
-        times.append(time.perf_counter() - t)
-        hist += np.bincount(np.asarray(frame.level), minlength=len(hist))
-        dots += int(np.asarray(frame.dots).sum())
+        k_state, _ = many(k_state, views, dt, count)
+        jax.block_until_ready(k_state)
+        k_times.append((time.perf_counter() - t) / chunk)
+    steps = len(times)
     ms = 1e3 * float(np.median(times))
     steps_s = 150 if n <= 100_000 else 30
     safety = _safety(fn, jax.tree.map(jnp.copy, state), view, dt, steps_s) if avoid else {}
@@ -269,6 +333,10 @@ def run_count(
         "dots": round(dots / steps, 1),
         "compile_s": compile_s,
         "ms_per_step": ms,
+        "k_steps": chunk,
+        "ms_per_step_k": 1e3 * float(np.median(k_times)),
+        "k_step_ratio": float(np.median(k_times)) / float(np.median(times)),
+        "kernels_per_step": kernels,
         "agent_steps_per_s": n / (ms * 1e-3),
         "level_histogram": (hist / steps).round(1).tolist(),  # last: not synthesized
         "state_bytes_per_agent": state_bytes / n,
@@ -303,6 +371,7 @@ def main() -> None:
     ap.add_argument("--agents", default="1000,10000,100000,1000000")
     ap.add_argument("--steps", type=int, default=20)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--chunk", type=int, default=30, help="frames per K-step call")
     ap.add_argument("--no-record", action="store_true")
     ap.add_argument("--cpu-devices", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--avoid", action="store_true", help="crowd dynamics on ([dynamics] avoid)")
@@ -324,7 +393,12 @@ def main() -> None:
     full_rate = 0.0
     for n in counts:
         steps = args.steps if n < 1_000_000 else max(3, args.steps // 4)
-        opts = {"avoid": args.avoid, "far_every": args.far_every, "dynamics_model": args.model}
+        opts = {
+            "avoid": args.avoid,
+            "far_every": args.far_every,
+            "dynamics_model": args.model,
+            "chunk": args.chunk,
+        }
         row = run_count(model, n, steps, bw, **opts)
         sim, state = row.pop("_sim")
         naive[str(n)] = naive_ms(model, n, 3)
@@ -368,9 +442,10 @@ def main() -> None:
 
 def _table(out: dict[str, Any]) -> str:
     lines = [
-        "| agents | min px | compile s | ms/step | agent-steps/s | levels 0…5, not synthesized "
-        "(mean) | of which dots | state B/agent | roof ms | naive ms | speed-up vs naive |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| agents | min px | compile s | ms/step | ms/step in K-step calls (× single) | kernels "
+        "per step | agent-steps/s | levels 0…5, not synthesized (mean) | of which dots | state "
+        "B/agent | roof ms | naive ms | speed-up vs naive |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     safety = [r for r in out["rows"] if "min_gap_ratio" in r]
     for r in out["rows"]:
@@ -378,7 +453,8 @@ def _table(out: dict[str, Any]) -> str:
         hist = " / ".join(f"{v:g}" for v in r["level_histogram"])
         lines.append(
             f"| {r['agents']:,} | {r['min_pixels']:g} | {r['compile_s']:.1f} | "
-            f"{r['ms_per_step']:.2f} | {r['agent_steps_per_s']:.3g} | {hist} | {r['dots']:g} | "
+            f"{r['ms_per_step']:.2f} | {r['ms_per_step_k']:.2f} ({r['k_step_ratio']:.2f}×) | "
+            f"{r['kernels_per_step']} | {r['agent_steps_per_s']:.3g} | {hist} | {r['dots']:g} | "
             f"{r['state_bytes_per_agent']:.0f} | "
             f"{r['roof_ms_per_step']:.2f} | {out['naive_ms_per_step'][n]:.1f} | "
             f"{out['naive_ms_per_step'][n] / r['ms_per_step']:.1f}× |"
@@ -387,7 +463,8 @@ def _table(out: dict[str, Any]) -> str:
         "",
         f"full detail (level-0 decode + FK, every agent): "
         f"{out['full_detail_agent_frames_per_s']:.3g} agent-frames/s; "
-        f"copy bandwidth {out['bandwidth_gbs']:.1f} GB/s",
+        f"copy bandwidth {out['bandwidth_gbs']:.1f} GB/s; K-step calls of "
+        f"{out['rows'][0]['k_steps']} frames",
     ]
     if safety:
         lines += [

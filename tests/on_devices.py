@@ -317,4 +317,82 @@ def per_device_task(reference: str, caps: str) -> dict[str, Any]:
     return out
 
 
-CHILD_TASKS = {"crowd": crowd_task, "pedestrians": pedestrians_task, "per_device": per_device_task}
+def _kept(state: Any, view: Any, frame: Any) -> dict[str, Any]:
+    """What the K-step tests record of a frame: a field of the state at the frame's start, the
+    camera, and every array of the frame."""
+    return {"x": state.x, "eye": view.eye, "frame": frame}
+
+
+def single_and_k_steps(sim: Any, state: Any, steps: int, chunk: int) -> dict[str, Any]:
+    """``steps`` frames of ``sim`` from ``state`` (as placed: one device or split) by single
+    compiled steps and by :meth:`~jcrowd.crowd.simulate.Simulation.compiled_steps` with
+    ``chunk`` frames per call (a last call with fewer). Returns both sides' per-frame records
+    (:func:`_kept`, host arrays stacked over frames) and final states, and the K-step
+    function's compilations and the devices holding its final state (``k_shards``)."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from jcrowd.crowd.devices import on_all_devices
+
+    single = sim.compiled()
+    s, rows = jax.tree.map(jnp.copy, state), []
+    for i in range(steps):
+        view = sim.view_at(i * sim.dt)
+        before = jax.device_get(s.x)  # the step donates ``s``
+        s, frame = single(s, view, sim.dt_array)
+        rows.append({"x": before, **jax.device_get({"eye": view.eye, "frame": frame})})
+    one = {k: np.stack([r[k] for r in rows]) for k in ("x", "eye")}
+    one["frame"] = jax.tree.map(lambda *a: np.stack(a), *[r["frame"] for r in rows])
+    many = sim.compiled_steps(chunk, _kept)
+    k, parts = jax.tree.map(jnp.copy, state), []
+    for start in range(0, steps, chunk):
+        n = min(chunk, steps - start)
+        count = on_all_devices(jnp.asarray(n, jnp.int32))
+        k, rec = many(k, sim.views(start, chunk), sim.dt_array, count)
+        parts.append(jax.tree.map(lambda a, n=n: np.asarray(a)[:n], jax.device_get(rec)))
+    k_rec = jax.tree.map(lambda *a: np.concatenate(a), *parts)
+    return {
+        "single": (one, jax.device_get(s)),
+        "k": (k_rec, jax.device_get(k)),
+        "k_shards": len(k.x.sharding.device_set),
+        "compilations": int(many._cache_size()),
+    }
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Two pytrees of host arrays equal bit for bit (NaN equal to NaN)."""
+    import jax
+    import numpy as np
+
+    pairs = zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True)
+    return all(np.array_equal(np.asarray(x), np.asarray(y), equal_nan=True) for x, y in pairs)
+
+
+def steps_task(steps: str, chunk: str) -> dict[str, Any]:
+    """The scenario on stdin split over every device: ``steps`` frames by single steps and by
+    K-step calls of ``chunk`` frames (:func:`single_and_k_steps`). Returns ``devices``,
+    ``shards`` (devices holding the K-step state), whether the records and the final states
+    are equal bit for bit, and the K-step function's compilations."""
+    import jax
+
+    from jcrowd.crowd import shard_state
+
+    sim, state = _prepared()
+    out = single_and_k_steps(sim, shard_state(state), int(steps), int(chunk))
+    (rec1, state1), (reck, statek) = out["single"], out["k"]
+    return {
+        "devices": len(jax.devices()),
+        "shards": out["k_shards"],
+        "records_equal": _same(rec1, reck),
+        "states_equal": _same(state1, statek),
+        "compilations": out["compilations"],
+    }
+
+
+CHILD_TASKS = {
+    "crowd": crowd_task,
+    "pedestrians": pedestrians_task,
+    "per_device": per_device_task,
+    "steps": steps_task,
+}

@@ -227,8 +227,6 @@ def render_scenario(
     style: str = "body",
 ) -> dict[str, Any]:
     """Step and draw ``scenario``; write the clip (and optionally one PNG still)."""
-    import jax
-
     from jcrowd.cli.runloop import RunLoop, scenario_obstacles
     from jcrowd.crowd.devices import in_agent_order, shard_state
     from jcrowd.crowd.simulate import prepare
@@ -238,7 +236,18 @@ def render_scenario(
 
     sim, state = prepare(scenario, model)
     bodies = body_levels(model, sim.crowd.decoders) if style == "body" else None
-    loop = RunLoop(sim, shard_state(state))  # one block of agents per device
+
+    def keep(state: Any, view: Any, frame: Any) -> dict[str, Any]:
+        """The dots' positions at the frame's start and the bodies the frame draws."""
+        return {
+            "xz": state.position,
+            "dots": frame.dots,
+            "slots": frame.slots,
+            "valid": frame.valid,
+            "points": frame.points,
+        }
+
+    loop = RunLoop(sim, shard_state(state), keep)  # one block of agents per device
     n_frames = sim.steps if frames is None else frames
     group_colors = np.asarray(sim.spawn.color, np.float32)
     n = sim.num_agents
@@ -246,14 +255,11 @@ def render_scenario(
     tints = tint_palette(n)
     # Slots per level as the step returns them (split over K devices a level holds K shares of
     # its capacity, rounded up: jcrowd.crowd.devices.per_device_config).
-    caps = tuple(int(s.shape[0]) for s in loop.first.slots)
+    caps = tuple(int(s.shape[0]) for s in loop.shapes["slots"])
     draw_ms = []
     sink = _Sink(out, scenario.fps)
     ok = False
     middle = None
-
-    def before(state: Any, view: Any) -> np.ndarray:  # where the dots stand at the frame
-        return in_agent_order(state.position, state)
 
     try:
         with CrowdRenderer(
@@ -264,10 +270,11 @@ def render_scenario(
             bodies=None if bodies is None else [*bodies, None],
             sky=bodies is not None,
         ) as renderer:
-            for i, xz, frame in loop.frames(n_frames, f"rendering {n_frames} frames", before):
+            for i, rec in loop.frames(n_frames, f"rendering {n_frames} frames"):
                 t = time.perf_counter()
-                host = jax.device_get((frame.slots, frame.valid, frame.points))
-                dots = in_agent_order(frame.dots, loop.state)
+                host = (rec["slots"], rec["valid"], rec["points"])
+                xz = in_agent_order(rec["xz"], loop.state)
+                dots = in_agent_order(rec["dots"], loop.state)
                 levels = _level_instances(
                     host, color_by, group_colors, tints, heights, bodies is None
                 )

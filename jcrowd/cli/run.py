@@ -1,15 +1,17 @@
 """``jcrowd run SCENARIO.toml``: simulate a crowd; record roots, visible joints or everything.
 
-The step is compiled once (timed apart as ``compile_s``) and then run ``--steps`` times (or
-``--seconds`` of scenario time; default: the scenario's duration), one host copy of what is
-recorded per step. ``recompiles`` counts compilations after the first (0 is the contract);
-``crowding_max`` the most agents the crowd dynamics' neighbour grid could not hold in any step
-(0 without ``[dynamics] avoid``); ``unblended_changes`` the level changes shown at once
-because the step's blend buckets were full (:mod:`jcrowd.crowd.level_blend`); ``spawned``,
-``exited`` (reached a goal or the end of an open path and left) and ``alive_end`` count
-agents; ``agents`` is the number of slots (with ``[[sources]]``: the pool,
-:mod:`jcrowd.crowd.pool`), and ``spawn_late`` the source agents due by the end that still wait
-for a free slot.
+The steps are compiled once (timed apart as ``compile_s``) and then run ``--steps`` times (or
+``--seconds`` of scenario time; default: the scenario's duration), up to 30 frames per compiled
+call (:class:`jcrowd.cli.runloop.RunLoop`; ``frames_per_call`` says how many: fewer where a
+frame's record is large) and one host copy of what is recorded per call;
+``ms_per_step_median`` is a call's time divided by its frames. ``recompiles`` counts
+compilations after the first (0 is the contract); ``crowding_max`` the most agents the crowd
+dynamics' neighbour grid could not hold in any step (0 without ``[dynamics] avoid``);
+``unblended_changes`` the level changes shown at once because the step's blend buckets were
+full (:mod:`jcrowd.crowd.level_blend`); ``spawned``, ``exited`` (reached a goal or the end of
+an open path and left) and ``alive_end`` count agents; ``agents`` is the number of slots (with
+``[[sources]]``: the pool, :mod:`jcrowd.crowd.pool`), and ``spawn_late`` the source agents due
+by the end that still wait for a free slot.
 
 Recording (``--out run.npz``, written atomically):
 
@@ -192,17 +194,6 @@ def jax_process_index() -> int:
     return jax.process_index()
 
 
-def _fetch(tree: Any) -> Any:
-    """Host copies of (possibly multi-process) global arrays."""
-    import jax
-
-    if jax.process_count() == 1:
-        return jax.device_get(tree)
-    from jax.experimental import multihost_utils
-
-    return multihost_utils.process_allgather(tree, tiled=True)
-
-
 def save_recording(path: str | Path, recording: dict[str, np.ndarray]) -> Path:
     """Write a recording as one ``.npz`` file, atomically."""
     from jcrowd.io.atomic import write_atomic
@@ -249,8 +240,7 @@ FRAME_KEYS = ("slots", "valid", "points")
 
 
 def _snapshot(sim: Any, record: str, state: Any, view: Any) -> dict[str, Any]:
-    """Host copies of what is recorded of the state at a step's start (before the step takes
-    the state's buffers)."""
+    """What is recorded of the state at a step's start (traced, in the compiled steps)."""
     snapshot: dict[str, Any] = {
         "position": state.position,
         "heading": state.heading,
@@ -271,7 +261,7 @@ def _snapshot(sim: Any, record: str, state: Any, view: Any) -> dict[str, Any]:
             stands=state.stands,
             stride=state.stride,
         )
-    return _fetch(snapshot)
+    return snapshot
 
 
 def _frame_parts(frame: Any, record: str, nlev: int) -> dict[str, Any]:
@@ -296,17 +286,16 @@ def simulate(sim: Any, state: Any, steps: int, record: str) -> tuple[dict[str, A
     from jcrowd.cli.runloop import RunLoop
     from jcrowd.crowd.devices import in_agent_order
 
-    loop = RunLoop(sim, state)
     nlev = len(sim.config.capacities)
+
+    def keep(state: Any, view: Any, frame: Any) -> dict[str, Any]:
+        return {**_snapshot(sim, record, state, view), **_frame_parts(frame, record, nlev)}
+
+    loop = RunLoop(sim, state, keep)
     rec: dict[str, list] = {k: [] for k in _record_keys(sim, record)}
     hist = np.zeros(nlev + 1, np.int64)
     counts = dict.fromkeys(("overflow", "deferred", "crowding", "unblended", "dots"), 0)
-
-    def before(state: Any, view: Any) -> dict[str, Any]:
-        return _snapshot(sim, record, state, view)
-
-    for _, host, frame in loop.frames(steps, f"{sim.num_agents:,} agents", before):
-        host.update(_fetch(_frame_parts(frame, record, nlev)))
+    for _, host in loop.frames(steps, f"{sim.num_agents:,} agents"):
         for key in PER_AGENT.intersection(host):  # agents may be interleaved over devices
             host[key] = in_agent_order(host[key], loop.state)
         for key in ("overflow", "deferred", "unblended"):
@@ -347,11 +336,14 @@ def _summary(
     sim: Any, loop: Any, steps: int, hist: np.ndarray, counts: dict[str, int]
 ) -> dict[str, Any]:
     """The run's JSON summary (the module docstring names the keys)."""
+    from jcrowd.cli.runloop import fetch
+
     result = {
         "agents": sim.num_agents,
         "steps": steps,
         "ms_per_step_median": 1e3 * float(np.median(loop.step_seconds)),
         "compile_s": loop.compile_s,
+        "frames_per_call": loop.chunk,
         "level_histogram": (hist / steps).round(1).tolist(),
         "dots_per_step": counts["dots"] / steps,
         "recompiles": loop.recompiles,
@@ -359,11 +351,11 @@ def _summary(
         "deferred_clips": counts["deferred"],
         "crowding_max": counts["crowding"],
         "unblended_changes": counts["unblended"],
-        "alive_end": int(np.sum(_fetch(loop.state.alive))),
+        "alive_end": int(np.sum(fetch(loop.state.alive))),
     }
     # Agents placed at t = 0 plus those [[sources]] added (each slot counts the agents it has
     # taken); an agent no longer alive has left through its goal or at its path's end.
-    result["spawned"] = sim.scenario.num_agents + int(np.sum(_fetch(loop.state.next_row)))
+    result["spawned"] = sim.scenario.num_agents + int(np.sum(fetch(loop.state.next_row)))
     result["exited"] = result["spawned"] - result["alive_end"]
     if sim.pool is not None:
         due = int(np.sum(np.asarray(sim.pool.times) < steps * sim.dt))

@@ -1,23 +1,24 @@
 """The run loop ``jcrowd run`` and ``jcrowd render`` share: compile the step once, then step.
 
-:class:`RunLoop` compiles a prepared simulation's step (timed apart as ``compile_s``: one step
-on a copy of the state, dropped), then :meth:`RunLoop.frames` advances it frame by frame with a
-progress bar on stderr, timing each step (to the state being ready) and handing the caller the
-frame. The step donates its input state, so anything the caller needs from the state *before*
-a step (a host snapshot for a recording, the positions for the dots it draws) is read by the
-``before`` hook. Also here: the model a scenario runs with and its obstacles as prisms.
+:class:`RunLoop` compiles a prepared simulation's steps, many frames per call
+(:meth:`~jcrowd.crowd.simulate.Simulation.compiled_steps`; compiling timed apart as
+``compile_s``), then :meth:`RunLoop.frames` advances them with a progress bar on stderr, timing
+each call (to the state being ready) and handing the caller each frame's record: what the
+caller's ``record`` function keeps of the state at the frame's start (a recording's snapshot,
+the positions of the dots it draws) and of the frame the step returns, copied to the host once
+per call. Also here: the model a scenario runs with and its obstacles as prisms.
 """
 
 from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 
-__all__ = ["RunLoop", "load_model", "scenario_obstacles"]
+__all__ = ["CHUNK", "RECORD_BYTES", "RunLoop", "fetch", "load_model", "scenario_obstacles"]
 
 
 def load_model(scenario: Any, override: str | None) -> tuple[Any, str]:
@@ -41,25 +42,57 @@ def scenario_obstacles(scenario: Any) -> np.ndarray:
     return prism_mesh(blocked_space(scenario.ground, scenario.layout))
 
 
+RECORD_BYTES = 256 << 20
+"""Device memory the records of one call of the run loop may take (:data:`CHUNK` frames at
+most): a record of whole frames at 1M agents would hold a few frames per call."""
+
+CHUNK = 30
+"""Frames per compiled call (:meth:`~jcrowd.crowd.simulate.Simulation.compiled_steps`)."""
+
+
+def fetch(tree: Any) -> Any:
+    """Host copies of (possibly multi-process) global arrays."""
+    import jax
+
+    if jax.process_count() == 1:
+        return jax.device_get(tree)
+    from jax.experimental import multihost_utils
+
+    return multihost_utils.process_allgather(tree, tiled=True)
+
+
 class RunLoop:
-    """A prepared simulation's compiled step and the state it advances.
+    """A prepared simulation's compiled steps and the state they advance.
 
     Attributes:
         sim: the :class:`~jcrowd.crowd.simulate.Simulation`.
         state: the crowd state now (placed on the devices by the caller).
-        compile_s: seconds to compile the step (and run it once on a copy).
-        step_seconds: each step's wall time, to its state being ready.
-        first: the frame of the compiling step (shapes as the step returns them).
+        shapes: one frame's record as shapes and dtypes (``jax.ShapeDtypeStruct``).
+        chunk: frames per compiled call (:data:`CHUNK`, fewer where one frame's record is
+            large: :data:`RECORD_BYTES`).
+        compile_s: seconds to compile the steps (a call that runs none, on a copy).
+        step_seconds: each frame's wall time: a call's time, to its state being ready, shared
+            by its frames.
     """
 
-    def __init__(self, sim: Any, state: Any):
+    def __init__(self, sim: Any, state: Any, record: Any):
         import jax
+        import jax.numpy as jnp
+
+        from jcrowd.crowd.devices import on_all_devices
+        from jcrowd.crowd.simulate import record_shapes
 
         self.sim = sim
-        self.step = sim.compiled()
+        self.shapes = record_shapes(sim, state, record)
+        leaves = jax.tree.leaves(self.shapes)
+        per_frame = sum(int(np.prod(a.shape)) * a.dtype.itemsize for a in leaves)
+        self.chunk = max(1, min(CHUNK, RECORD_BYTES // max(1, per_frame)))
+        self.step = sim.compiled_steps(self.chunk, record)
+        self._counts = {n: on_all_devices(jnp.asarray(n, jnp.int32)) for n in range(self.chunk + 1)}
         t0 = time.perf_counter()
-        warm = jax.tree.map(jax.numpy.copy, state)  # the step donates its input state
-        _, self.first = jax.block_until_ready(self.step(warm, sim.view_at(0.0), sim.dt_array))
+        warm = jax.tree.map(jnp.copy, state)  # the steps donate their input state
+        views = sim.views(0, self.chunk)
+        jax.block_until_ready(self.step(warm, views, sim.dt_array, self._counts[0]))
         self.compile_s = time.perf_counter() - t0
         self.state = state
         self.step_seconds: list[float] = []
@@ -69,11 +102,10 @@ class RunLoop:
         """Compilations after the first (0 is the contract)."""
         return int(self.step._cache_size()) - 1
 
-    def frames(
-        self, count: int, label: str, before: Callable[[Any, Any], Any] | None = None
-    ) -> Iterator[tuple[int, Any, Any]]:
-        """Advance ``count`` steps; yield ``(i, before(state, view), frame)`` after each, the
-        frame being the step's start and :attr:`state` the state after it."""
+    def frames(self, count: int, label: str) -> Iterator[tuple[int, Any]]:
+        """Advance ``count`` steps, :attr:`chunk` per call; yield ``(i, record)`` for each, the
+        record as host arrays (``record(state at frame i's start, camera, frame)``), and
+        :attr:`state` the state after the call that ran frame ``i``."""
         import jax
         from rich.console import Console
         from rich.progress import Progress
@@ -81,13 +113,14 @@ class RunLoop:
         sim = self.sim
         with Progress(console=Console(file=sys.stderr), transient=True) as bar:
             task = bar.add_task(label, total=count)
-            for i in range(count):
-                view = sim.view_at(i * sim.dt)
-                pre = None if before is None else before(self.state, view)
+            for start in range(0, count, self.chunk):
+                n = min(self.chunk, count - start)
+                views = sim.views(start, self.chunk)
                 t = time.perf_counter()
-                new, frame = self.step(self.state, view, sim.dt_array)
-                jax.block_until_ready(new)
-                self.step_seconds.append(time.perf_counter() - t)
-                self.state = new
-                yield i, pre, frame
-                bar.advance(task)
+                self.state, records = self.step(self.state, views, sim.dt_array, self._counts[n])
+                jax.block_until_ready(self.state)
+                self.step_seconds += [(time.perf_counter() - t) / n] * n
+                host = fetch(records)
+                for j in range(n):
+                    yield start + j, jax.tree.map(lambda a, j=j: a[j], host)
+                    bar.advance(task)

@@ -29,8 +29,10 @@ from jcrowd.crowd.lod import distance_levels as distance_levels
 from jcrowd.crowd.lod import in_frustum as in_frustum
 from jcrowd.crowd.lod import screen_height_px as screen_height_px
 from jcrowd.crowd.schedule import schedule as schedule
+from jcrowd.crowd.simulate import Record as Record
 from jcrowd.crowd.simulate import Simulation as Simulation
 from jcrowd.crowd.simulate import prepare as prepare
+from jcrowd.crowd.simulate import record_shapes as record_shapes
 from jcrowd.crowd.simulate import step_compiler_options as step_compiler_options
 from jcrowd.crowd.simulate import thresholds_for as thresholds_for
 from jcrowd.crowd.state import DEFAULT_RADIUS as DEFAULT_RADIUS

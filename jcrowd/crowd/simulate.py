@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -43,8 +44,10 @@ from jcrowd.scenario.schema import Scenario
 from jcrowd.scenario.spawning import Spawn, spawn, spawn_sources
 
 __all__ = [
+    "Record",
     "Simulation",
     "prepare",
+    "record_shapes",
     "step_compiler_options",
     "thresholds_for",
 ]
@@ -132,6 +135,37 @@ class Simulation:
             )
         )
 
+    def views(self, first: int, steps: int) -> CameraView:
+        """The scenario camera at frames ``first … first + steps − 1`` (times ``i · dt``),
+        stacked on a leading axis of ``steps``, as :meth:`compiled_steps` takes them; on every
+        device the step runs on."""
+        cam = self.scenario.camera
+        keys = [camera_at(cam, (first + i) * self.dt) for i in range(steps)]
+        eyes, targets = [e for e, _ in keys], [t for _, t in keys]
+        const = np.ones(steps, np.float32)
+        return on_all_devices(
+            CameraView(
+                eye=jnp.asarray(np.stack(eyes), jnp.float32),
+                target=jnp.asarray(np.stack(targets), jnp.float32),
+                fov_deg=jnp.asarray(cam.fov_deg * const),
+                aspect=jnp.asarray(cam.width / cam.height * const),
+                height_px=jnp.asarray(cam.height * const),
+            )
+        )
+
+    def _one_step(self) -> Callable[[CrowdState, CameraView, jax.Array], tuple[CrowdState, Frame]]:
+        """The step with the model and settings closed over, split over the devices if there
+        are several (:func:`~jcrowd.crowd.devices.split_step`)."""
+        crowd, config, world, pool = self.crowd, self.config, self.world, self.pool
+        devices = jax.devices()
+        if len(devices) > 1:
+            return cast(Any, split_step(crowd, config, devices, world, pool))
+
+        def one(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
+            return step(crowd, config, state, view, dt, world=world, pool=pool)
+
+        return one
+
     def compiled(self, donate: bool = True) -> Any:
         """``jit(step)`` with the model and settings closed over: ``(state, view, dt) → …``.
 
@@ -140,21 +174,79 @@ class Simulation:
         agents): the state passed in must not be used again; copy it first if it must
         (``jax.tree.map(jnp.copy, state)``).
         """
-        crowd, config, world, pool = self.crowd, self.config, self.world, self.pool
+        return _jit(self._one_step(), donate)
 
-        def run(state: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Frame]:
-            return step(crowd, config, state, view, dt, world=world, pool=pool)
+    def compiled_steps(self, steps: int, record: Record, donate: bool = True) -> Any:
+        """Up to ``steps`` frames in one compiled call: ``(state, views, dt, count) →
+        (state, records)``.
 
-        devices = jax.devices()
-        if len(devices) > 1:
-            run = split_step(crowd, config, devices, world, pool)
-        options = step_compiler_options()
-        donated = (0,) if donate else ()
-        if options:
-            jitted = jax.jit(run, donate_argnums=donated, compiler_options=options)
-        else:
-            jitted = jax.jit(run, donate_argnums=donated)
-        return jitted if len(devices) == 1 else OneStepAtATime(jitted)
+        The call runs ``count`` single steps (an int32 array, at most ``steps``: a different
+        count does not recompile) in one compiled loop, frame ``i`` with camera ``views[i]``
+        (:meth:`views`), and returns the state after them and, in buffers with a leading axis
+        of ``steps`` allocated once per call, ``record(state, view, frame)`` of each frame:
+        what the caller keeps of the state at the frame's start and of the frame the step
+        returns (``record`` is traced: it selects and may reduce, it must not read back to
+        the host). Rows past ``count`` are zeros. The states and records equal ``count`` calls
+        of :meth:`compiled` (the same step, tested bit for bit, on one device and split over
+        several).
+
+        Why: each call of the compiled step is a Python-level dispatch of the whole state
+        (about 130 arrays) plus, on several devices, a wait for the step to finish; the loop
+        pays that once per ``steps`` frames. The buffers are ``steps`` times one frame's
+        record (:func:`record_shapes`), so a caller recording large frames picks a smaller
+        ``steps``.
+        """
+        one = self._one_step()
+
+        def advance(s: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Any]:
+            new, frame = one(s, view, dt)
+            return new, record(s, view, frame)
+
+        def run(
+            state: CrowdState, views: CameraView, dt: jax.Array, count: jax.Array
+        ) -> tuple[CrowdState, Any]:
+            first = jax.tree.map(lambda v: v[0], views)
+            shapes = jax.eval_shape(advance, state, first, dt)[1]
+            buffers = jax.tree.map(lambda a: jnp.zeros((steps, *a.shape), a.dtype), shapes)
+
+            def body(i: jax.Array, carry: tuple[CrowdState, Any]) -> tuple[CrowdState, Any]:
+                s, buf = carry
+                new, out = advance(s, jax.tree.map(lambda v: v[i], views), dt)
+                put = functools.partial(jax.lax.dynamic_update_index_in_dim, index=i, axis=0)
+                return new, jax.tree.map(put, buf, out)
+
+            return jax.lax.fori_loop(0, jnp.minimum(count, steps), body, (state, buffers))
+
+        return _jit(run, donate)
+
+
+Record = Callable[[CrowdState, CameraView, Frame], Any]
+"""What :meth:`Simulation.compiled_steps` keeps of each frame: ``record(state at the frame's
+start, camera, frame) → pytree of arrays``."""
+
+
+def record_shapes(sim: Simulation, state: CrowdState, record: Record) -> Any:
+    """The shapes and dtypes (``jax.ShapeDtypeStruct``) ``record`` returns for one frame of
+    ``sim`` from ``state``; nothing runs."""
+    one = sim._one_step()
+
+    def frame(s: CrowdState, view: CameraView, dt: jax.Array) -> Any:
+        return record(s, view, one(s, view, dt)[1])
+
+    return jax.eval_shape(frame, state, sim.view_at(0.0), sim.dt_array)
+
+
+def _jit(run: Callable[..., Any], donate: bool) -> Any:
+    """``run`` compiled with the step's options (:func:`step_compiler_options`), donating its
+    first argument if ``donate``; on several devices, returning only once every device is done
+    (:class:`~jcrowd.pedestrians.blocking.OneStepAtATime`)."""
+    options = step_compiler_options()
+    donated = (0,) if donate else ()
+    if options:
+        jitted = jax.jit(run, donate_argnums=donated, compiler_options=options)
+    else:
+        jitted = jax.jit(run, donate_argnums=donated)
+    return jitted if len(jax.devices()) == 1 else OneStepAtATime(jitted)
 
 
 NEIGHBOUR_CELL_M = 1.6
