@@ -48,6 +48,7 @@ from jcrowd.crowd.synthesis import (
     pose_from_coeffs,
 )
 from jcrowd.errors import KrigingError
+from jcrowd.indexing import first_true
 from jcrowd.kriging.universal import reliability_one, weights_and_reliability
 from jcrowd.model.motion_model import MotionModel
 from jcrowd.motion.fastmath import sincos
@@ -359,7 +360,7 @@ def next_clips_lod(
     c = _aimed_rows(cm, origin, control, target, speed, height)
     n = _nearest_rows(cm, c)
     m = c.shape[0]
-    (k,) = jnp.nonzero(krige, size=min(budget, m), fill_value=m)
+    k = first_true(krige, min(budget, m), m)
     ks = jnp.minimum(k, m - 1)
     c_k, a_k = _kriged_rows(cm, c[ks], n[ks], min_reliability)
     a = _sample_rows(cm, n).at[k].set(a_k, mode="drop")

@@ -43,6 +43,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
+from jcrowd.indexing import first_true, first_true_per_class
 from jcrowd.pedestrians.heading import smoothstep
 
 __all__ = [
@@ -146,15 +147,14 @@ def blend_sources(
     # The blending places first (one compaction of the slots), then each source level's.
     budget = [blend_capacity(c) for c in sizes]
     any_src = src < levels
-    (blending,) = jnp.nonzero(any_src, size=min(total, sum(budget)), fill_value=total)
+    blending = first_true(any_src, min(total, sum(budget)), total)
     unblended = jnp.maximum(jnp.sum(any_src, dtype=jnp.int32) - blending.shape[0], 0)
     src_b = jnp.concatenate([src, jnp.full((1,), levels, src.dtype)])[blending]
     padded = jnp.concatenate([blending, jnp.full((1,), total, blending.dtype)])
     olds, ids_all, places = [], [], []
-    for a in range(levels):
-        mask = src_b == a
-        (k,) = jnp.nonzero(mask, size=budget[a], fill_value=blending.shape[0])
-        count = jnp.sum(mask, dtype=jnp.int32)
+    per_level = first_true_per_class(src_b, tuple(budget), blending.shape[0])
+    for a, k in enumerate(per_level):
+        count = jnp.sum(src_b == a, dtype=jnp.int32)
         unblended = unblended + jnp.maximum(count - budget[a], 0)
         ids = ids_at[padded[k]]
         olds.append(decode(a, ids, jnp.minimum(count, budget[a])))

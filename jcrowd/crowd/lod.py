@@ -22,6 +22,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
+from jcrowd.indexing import first_true, first_true_per_class
+
 __all__ = [
     "Buckets",
     "CameraView",
@@ -175,11 +177,11 @@ def _unconstrained(want: Int[Array, " N"], capacities: tuple[int, ...]) -> Bucke
     """
     n, nlev = want.shape[0], len(capacities)
     short = min(n, sum(capacities))
-    (placed,) = jnp.nonzero(want < nlev, size=short, fill_value=n)
+    placed = first_true(want < nlev, short, n)
     placed_level = jnp.where(placed < n, want[jnp.minimum(placed, n - 1)], nlev)
     slots, valid = [], []
-    for lv, cap in enumerate(capacities):
-        (k,) = jnp.nonzero(placed_level == lv, size=min(cap, short), fill_value=short)
+    per_level = first_true_per_class(placed_level, tuple(min(c, short) for c in capacities), short)
+    for k, cap in zip(per_level, capacities, strict=True):
         idx = jnp.where(k < short, placed[jnp.minimum(k, short - 1)], n).astype(jnp.int32)
         idx = jnp.pad(idx, (0, cap - idx.shape[0]), constant_values=n)
         slots.append(idx)
@@ -203,7 +205,7 @@ def _greedy(
     for lv, cap in enumerate(capacities):
         cand = (~placed) & (min_level <= lv)
         if cap >= n:
-            (idx,) = jnp.nonzero(cand, size=cap, fill_value=n)
+            idx = first_true(cand, cap, n)
             ok = idx < n
         else:
             # Rank only when the candidates overflow the level (one branch runs: the predicate
@@ -214,7 +216,7 @@ def _greedy(
                 return jnp.where(ok, idx, n).astype(jnp.int32), ok
 
             def compact(cand: Array, cap: int = cap) -> tuple[Array, Array]:
-                (idx,) = jnp.nonzero(cand, size=cap, fill_value=n)
+                idx = first_true(cand, cap, n)
                 return idx.astype(jnp.int32), idx < n
 
             idx, ok = jax.lax.cond(jnp.sum(cand) > cap, ranked, compact, cand)

@@ -36,6 +36,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from jcrowd.crowd.state import CrowdState
+from jcrowd.indexing import first_true
 
 __all__ = ["POOL_FIELDS", "Pool", "expected_stay", "plan_pool", "spawn_due"]
 
@@ -126,7 +127,7 @@ def spawn_due(
     row = jnp.take_along_axis(state.queue, at[:, None], axis=1)[:, 0]
     queued = (state.next_row < q) & (row >= 0)
     due = ~state.alive & queued & (times[jnp.maximum(row, 0)] <= state.clock)
-    (idx,) = jnp.nonzero(due, size=min(budget, n), fill_value=n)
+    idx = first_true(due, min(budget, n), n)
     rows = row[jnp.minimum(idx, n - 1)]
     # An agent whose disc would overlap someone's waits (its slot tries again next step): the
     # agents alive in this block, and the agents appearing before it in this call.

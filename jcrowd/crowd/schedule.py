@@ -19,6 +19,7 @@ from jaxtyping import Array, Bool
 from jcrowd.crowd.clips import CrowdModel, next_clips_lod
 from jcrowd.crowd.state import CrowdState, StepConfig
 from jcrowd.crowd.steering import aim_point, current_field, waypoint_xz
+from jcrowd.indexing import first_true
 from jcrowd.pedestrians.navigation import field_values
 from jcrowd.pedestrians.world import World
 
@@ -67,7 +68,7 @@ def _next_clips(
     n = state.num_agents
     last = float(cm.frames - 1)
     need = alive & ~state.has_next & (state.tau >= last / 2)
-    (idx,) = jnp.nonzero(need, size=min(config.refresh or n // 32 + 64, n), fill_value=n)
+    idx = first_true(need, min(config.refresh or n // 32 + 64, n), n)
     safe = jnp.where(idx < n, idx, 0)
     origin = jnp.stack(
         [state.origin_x[safe], state.origin_z[safe], state.origin_heading[safe]], axis=1

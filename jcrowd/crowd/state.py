@@ -20,6 +20,7 @@ from jaxtyping import Array, Bool, Float, Int
 from jcrowd.crowd.clips import CrowdModel, next_clips
 from jcrowd.crowd.synthesis import clip_core
 from jcrowd.errors import JcrowdError
+from jcrowd.indexing import first_true
 from jcrowd.pedestrians.neighbours import GridSpec
 from jcrowd.pedestrians.params import AvoidanceParams
 
@@ -393,7 +394,7 @@ def refresh_far_cores(
     cores_of = jax.vmap(lambda i: clip_core(lv, state.mix[i, state.current[i]]).reshape(-1))
 
     def some() -> tuple[Array, Array]:
-        (k,) = jnp.nonzero(stale, size=budget, fill_value=cap)
+        k = first_true(stale, budget, cap)
         ids = jnp.where(k < cap, safe[jnp.minimum(k, cap - 1)], n)
         cores = cores_of(jnp.minimum(ids, n - 1))
         pad = cap - budget

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from jcrowd.crowd.state import CrowdState, StepConfig
+from jcrowd.indexing import first_true
 from jcrowd.motion.fastmath import sincos
 from jcrowd.pedestrians.neighbours import GridSpec
 from jcrowd.pedestrians.step import Pedestrians, pedestrian_step
@@ -114,7 +115,7 @@ def due_rows(
     n = near.shape[0]
     tick = jnp.round(clock / dt).astype(jnp.int32)
     turn = jnp.remainder(tick + jnp.arange(n, dtype=jnp.int32), every) == 0
-    (rows,) = jnp.nonzero(near | turn, size=size, fill_value=n)
+    rows = first_true(near | turn, size, n)
     return rows.astype(jnp.int32)
 
 

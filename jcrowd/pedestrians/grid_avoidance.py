@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
+from jcrowd.indexing import first_true
 from jcrowd.pedestrians.avoidance import avoid_rows, crowd_table
 from jcrowd.pedestrians.neighbours import CellList, GridSpec, near_places
 from jcrowd.pedestrians.params import AvoidanceParams
@@ -124,7 +125,7 @@ def _next_tier(
         return velocity
 
     def in_bucket(velocity: Array, *, b: int) -> Array:
-        (idx,) = jnp.nonzero(dense, size=b, fill_value=n)
+        idx = first_true(dense, b, n)
         safe = jnp.where(idx < n, idx, 0)
         full, _ = near_places(grid, cells, position[safe], k, own[safe])
         return velocity.at[idx].set(velocities(safe, full), mode="drop")

@@ -36,6 +36,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from jcrowd.errors import JcrowdError
+from jcrowd.indexing import first_true
 
 __all__ = [
     "CellList",
@@ -188,8 +189,7 @@ def cell_list(spec: GridSpec, position: Float[Array, "N 2"], alive: Bool[Array, 
     bucket = max(1, n // 8)
 
     def in_bucket() -> tuple[Array, Array]:
-        (idx,) = jnp.nonzero(left, size=bucket, fill_value=n)
-        idx = idx.astype(jnp.int32)  # nonzero gives int64 with x64 on; the marks are int32
+        idx = first_true(left, bucket, n)
         cell_b = jnp.where(idx < n, cell[jnp.minimum(idx, n - 1)], ncell)
         rank_b, last = rounds(jnp.ones((), jnp.int32), cell_b, idx, no_rank[:bucket], table)
         return rank.at[idx].set(rank_b, mode="drop"), last
