@@ -4,8 +4,8 @@ Plaza made in code: N agents uniformly in a square at 1 agent per 10 m², each w
 random point of the square, camera at the near edge 1.7 m high looking across, 60° vertical
 fov, 1280×720, the shipped default model and the default LOD budget. Columns: compile s,
 ms/step (median over steps after warm-up, ``block_until_ready``), the same in K-step calls
-(``Simulation.compiled_steps``, ``--chunk`` frames per call, default 30, recording each frame's
-levels and dots as the single-step loop reads them; a call's time ÷ its frames, median over
+(``Simulation.compiled_steps``, ``--chunk`` frames per call, default 30, recording every
+frame whole, as the single step returns it; a call's time ÷ its frames, median over
 calls alternated with as many single steps, and its ratio to the single step),
 ``kernels_per_step`` (top-level operations of the compiled single step's optimized HLO on this
 device kind: :func:`kernels_per_step`), agent-steps/s, the mean level histogram (last = culled),
@@ -204,9 +204,11 @@ def full_detail_rate(sim: Any, state: Any, n: int, repeats: int) -> float:
     return n / (_median_ms(lambda: f(*args), repeats) * 1e-3)
 
 
-def _counted(state: Any, view: Any, frame: Any) -> dict[str, Any]:
-    """What the K-step calls keep of each frame: what the single-step loop reads back."""
-    return {"level": frame.level, "dots": frame.dots}
+def _counted(state: Any, view: Any, frame: Any) -> Any:
+    """What the K-step calls keep of each frame: the whole frame, as the single step returns
+    it (kept to the last array: XLA would skip computing what nothing reads, e.g. the
+    coarse levels' points)."""
+    return frame
 
 
 HLO_PLUMBING = frozenset(("parameter", "constant", "tuple", "get-tuple-element", "bitcast"))
