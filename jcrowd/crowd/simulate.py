@@ -44,6 +44,7 @@ from jcrowd.scenario.schema import Scenario
 from jcrowd.scenario.spawning import Spawn, spawn, spawn_sources
 
 __all__ = [
+    "KSteps",
     "Record",
     "Simulation",
     "prepare",
@@ -183,18 +184,19 @@ class Simulation:
         The call runs ``count`` single steps (an int32 array, at most ``steps``: a different
         count does not recompile) in one compiled loop, frame ``i`` with camera ``views[i]``
         (:meth:`views`), and returns the state after them and, in buffers with a leading axis
-        of ``steps`` allocated once per call, ``record(state, view, frame)`` of each frame:
-        what the caller keeps of the state at the frame's start and of the frame the step
-        returns (``record`` is traced: it selects and may reduce, it must not read back to
-        the host). Rows past ``count`` are zeros. The states and records equal ``count`` calls
-        of :meth:`compiled` (the same step, tested bit for bit, on one device and split over
-        several).
+        of ``steps``, ``record(state, view, frame)`` of each frame: what the caller keeps of
+        the state at the frame's start and of the frame the step returns (``record`` is
+        traced: it selects and may reduce, it must not read back to the host). Rows past
+        ``count`` hold what an earlier call wrote there (zeros at first). The states and
+        records equal ``count`` calls of :meth:`compiled` (the same step, tested bit for bit,
+        on one device and split over several).
 
         Why: each call of the compiled step is a Python-level dispatch of the whole state
         (about 130 arrays) plus, on several devices, a wait for the step to finish; the loop
         pays that once per ``steps`` frames. The buffers are ``steps`` times one frame's
         record (:func:`record_shapes`), so a caller recording large frames picks a smaller
-        ``steps``.
+        ``steps``; they are reused from call to call (:class:`KSteps`): a call's records are
+        valid until the next call.
         """
         one = self._one_step()
 
@@ -203,12 +205,8 @@ class Simulation:
             return new, record(s, view, frame)
 
         def run(
-            state: CrowdState, views: CameraView, dt: jax.Array, count: jax.Array
+            state: CrowdState, buffers: Any, views: CameraView, dt: jax.Array, count: jax.Array
         ) -> tuple[CrowdState, Any]:
-            first = jax.tree.map(lambda v: v[0], views)
-            shapes = jax.eval_shape(advance, state, first, dt)[1]
-            buffers = jax.tree.map(lambda a: jnp.zeros((steps, *a.shape), a.dtype), shapes)
-
             def body(i: jax.Array, carry: tuple[CrowdState, Any]) -> tuple[CrowdState, Any]:
                 s, buf = carry
                 new, out = advance(s, jax.tree.map(lambda v: v[i], views), dt)
@@ -217,7 +215,57 @@ class Simulation:
 
             return jax.lax.fori_loop(0, jnp.minimum(count, steps), body, (state, buffers))
 
-        return _jit(run, donate)
+        return KSteps(_jit(run, donate, (1,)), advance, steps)
+
+
+class KSteps:
+    """The compiled loop of :meth:`Simulation.compiled_steps`:
+    ``(state, views, dt, count) → (state, records)``.
+
+    The records' buffers are allocated by the first call, laid out over the devices as the
+    compiled loop returns them, and handed back to the loop at the next call (donated), so a
+    call neither allocates nor clears them: a call's records are valid until the next call
+    (read them to the host first; arrays of an earlier call are deleted).
+    """
+
+    def __init__(self, jitted: Any, advance: Callable[..., Any], steps: int) -> None:
+        self._jitted = jitted
+        self._advance = advance
+        self._steps = steps
+        self._buffers: Any = None
+
+    def _fresh(self, state: CrowdState, views: CameraView, dt: jax.Array, count: Any) -> Any:
+        """Zeroed buffers laid out as the compiled loop returns its records (so the next
+        call, which takes the records back, has the first call's signature: no second
+        compilation). One device: left uncommitted, as the step's own outputs are from an
+        uncommitted state."""
+        first = jax.tree.map(lambda v: v[0], views)
+        shapes = jax.eval_shape(self._advance, state, first, dt)[1]
+        spec = jax.tree.map(
+            lambda a: jax.ShapeDtypeStruct((self._steps, *a.shape), a.dtype), shapes
+        )
+
+        def zeros() -> Any:
+            return jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), spec)
+
+        if len(jax.devices()) == 1:
+            return jax.jit(zeros)()
+        compiled = self._jitted.lower(state, spec, views, dt, count).compile()
+        return jax.jit(zeros, out_shardings=compiled.output_shardings[1])()
+
+    def __call__(
+        self, state: CrowdState, views: CameraView, dt: jax.Array, count: jax.Array
+    ) -> tuple[CrowdState, Any]:
+        buffers = self._buffers
+        if buffers is None:
+            buffers = self._fresh(state, views, dt, count)
+        self._buffers = None
+        state, records = self._jitted(state, buffers, views, dt, count)
+        self._buffers = records
+        return state, records
+
+    def _cache_size(self) -> int:
+        return int(self._jitted._cache_size())
 
 
 Record = Callable[[CrowdState, CameraView, Frame], Any]
@@ -236,12 +284,12 @@ def record_shapes(sim: Simulation, state: CrowdState, record: Record) -> Any:
     return jax.eval_shape(frame, state, sim.view_at(0.0), sim.dt_array)
 
 
-def _jit(run: Callable[..., Any], donate: bool) -> Any:
+def _jit(run: Callable[..., Any], donate: bool, also: tuple[int, ...] = ()) -> Any:
     """``run`` compiled with the step's options (:func:`step_compiler_options`), donating its
-    first argument if ``donate``; on several devices, returning only once every device is done
-    (:class:`~jcrowd.pedestrians.blocking.OneStepAtATime`)."""
+    first argument if ``donate`` and the arguments ``also``; on several devices, returning only
+    once every device is done (:class:`~jcrowd.pedestrians.blocking.OneStepAtATime`)."""
     options = step_compiler_options()
-    donated = (0,) if donate else ()
+    donated = ((0,) if donate else ()) + also
     if options:
         jitted = jax.jit(run, donate_argnums=donated, compiler_options=options)
     else:
