@@ -221,7 +221,8 @@ def test_the_vertex_shader_skins_every_vertex_as_skin_does(ctx, level, which: st
             np.testing.assert_allclose(got[..., 3], 1.0)
             np.testing.assert_allclose(got[..., :3], want, atol=1e-5)
     finally:
-        previous.use()
         body.release()
-        fbo.release()
         prog.release()
+        if previous is not None:  # none bound yet (this worker's first drawing test): keep ours
+            previous.use()
+            fbo.release()

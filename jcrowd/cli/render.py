@@ -216,6 +216,18 @@ def _dot_instances(
     return LevelInstances(_dot_sticks(xz, heights), dots, _for_capsules(colors))
 
 
+def _drawn(state: Any, view: Any, frame: Any) -> dict[str, Any]:
+    """What a rendered frame needs from a step: the dots' positions at the frame's start and
+    the bodies the frame draws."""
+    return {
+        "xz": state.position,
+        "dots": frame.dots,
+        "slots": frame.slots,
+        "valid": frame.valid,
+        "points": frame.points,
+    }
+
+
 def render_scenario(
     scenario: Any,
     model: Any,
@@ -236,18 +248,7 @@ def render_scenario(
 
     sim, state = prepare(scenario, model)
     bodies = body_levels(model, sim.crowd.decoders) if style == "body" else None
-
-    def keep(state: Any, view: Any, frame: Any) -> dict[str, Any]:
-        """The dots' positions at the frame's start and the bodies the frame draws."""
-        return {
-            "xz": state.position,
-            "dots": frame.dots,
-            "slots": frame.slots,
-            "valid": frame.valid,
-            "points": frame.points,
-        }
-
-    loop = RunLoop(sim, shard_state(state), keep)  # one block of agents per device
+    loop = RunLoop(sim, shard_state(state), _drawn)  # one block of agents per device
     n_frames = sim.steps if frames is None else frames
     group_colors = np.asarray(sim.spawn.color, np.float32)
     n = sim.num_agents

@@ -1,10 +1,9 @@
 """``jcrowd run SCENARIO.toml``: simulate a crowd; record roots, visible joints or everything.
 
-The steps are compiled once (timed apart as ``compile_s``) and then run ``--steps`` times (or
-``--seconds`` of scenario time; default: the scenario's duration), up to 30 frames per compiled
-call (:class:`jcrowd.cli.runloop.RunLoop`; ``frames_per_call`` says how many: fewer where a
-frame's record is large) and one host copy of what is recorded per call;
-``ms_per_step_median`` is a call's time divided by its frames. ``recompiles`` counts
+The steps are compiled once (``compile_s``), then run ``--steps`` times (or ``--seconds``;
+default: the scenario's duration), ``frames_per_call`` (30, fewer for large records) per call
+of :class:`jcrowd.cli.runloop.RunLoop`; ``ms_per_step_median`` is a call's time ÷ its frames.
+``recompiles`` counts
 compilations after the first (0 is the contract); ``crowding_max`` the most agents the crowd
 dynamics' neighbour grid could not hold in any step (0 without ``[dynamics] avoid``);
 ``unblended_changes`` the level changes shown at once because the step's blend buckets were
@@ -24,9 +23,8 @@ Recording (``--out run.npz``, written atomically):
 - ``all``: also each agent's clip state (phase, controls of the current and next clip, whether
   a next clip is chosen) so ``jcrowd export`` can re-synthesize any agent at full detail.
 
-``--cpu-devices K`` splits the crowd over K CPU devices (one per core is fastest): each steps
-its own block of agents with 1/K of every LOD budget (:func:`jcrowd.crowd.simulate.Simulation.
-compiled`); the agent count must divide by K.
+``--cpu-devices K`` splits the crowd over K CPU devices (one per core is fastest; the agent
+count must divide by K): each steps its own block of agents with 1/K of every LOD budget.
 
 Several processes (``--coordinator HOST:PORT --num-processes N --process-id I``, one command
 per process): JAX's multi-process runtime (``jax.distributed``; gloo collectives on CPU) joins
@@ -36,8 +34,8 @@ own block of agents, and process 0 writes the recording. Each process prints its
 Arrays are named ``position``, ``heading``, ``level``, ``dots``, ``alive``, ``slots_l``,
 ``valid_l``, ``points_l``, ``tau``, ``control``, ``control_next``, ``has_next``, ``stands``
 (with the dynamics on: standing at a double-support phase), ``stride`` (the planted feet's
-stride warp, :func:`jcrowd.motion.planting.warp_stride`) plus ``height``,
-``group``, ``color``, ``parents`` (bones to draw), ``obstacles`` (scenarios with walls: their
+stride warp, :func:`jcrowd.motion.planting.warp_stride`) plus ``height``, ``group``, ``color``,
+``parents`` (bones to draw), ``obstacles`` (scenarios with walls: their
 prisms, :func:`jcrowd.render.meshes.prism_mesh`), ``eye``/``target`` per step and ``lens``
 (fov, near, far) of the camera, ``fps`` and ``model`` (the model file used)."""
 
