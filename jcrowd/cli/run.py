@@ -3,14 +3,13 @@
 The steps are compiled once (``compile_s``), then run ``--steps`` times (or ``--seconds``;
 default: the scenario's duration), ``frames_per_call`` (30, fewer for large records) per call
 of :class:`jcrowd.cli.runloop.RunLoop`; ``ms_per_step_median`` is a call's time ÷ its frames.
-``recompiles`` counts
-compilations after the first (0 is the contract); ``crowding_max`` the most agents the crowd
-dynamics' neighbour grid could not hold in any step (0 without ``[dynamics] avoid``);
-``unblended_changes`` the level changes shown at once because the step's blend buckets were
-full (:mod:`jcrowd.crowd.level_blend`); ``spawned``, ``exited`` (reached a goal or the end of
-an open path and left) and ``alive_end`` count agents; ``agents`` is the number of slots (with
-``[[sources]]``: the pool, :mod:`jcrowd.crowd.pool`), and ``spawn_late`` the source agents due
-by the end that still wait for a free slot.
+``recompiles`` counts compilations after the first (0 is the contract); ``crowding_max`` the
+most agents the crowd dynamics' neighbour grid could not hold in any step (0 without
+``[dynamics] avoid``); ``unblended_changes`` the level changes shown at once because the
+step's blend buckets were full (:mod:`jcrowd.crowd.level_blend`); ``spawned``, ``exited``
+(reached a goal or the end of an open path and left) and ``alive_end`` count agents;
+``agents`` is the number of slots (with ``[[sources]]``: the pool, :mod:`jcrowd.crowd.pool`),
+and ``spawn_late`` the source agents due by the end that still wait for a free slot.
 
 Recording (``--out run.npz``, written atomically):
 

@@ -177,7 +177,9 @@ class Simulation:
         """
         return _jit(self._one_step(), donate)
 
-    def compiled_steps(self, steps: int, record: Record, donate: bool = True) -> Any:
+    def compiled_steps(
+        self, steps: int, record: Record, donate: bool = True, shapes: Any = None
+    ) -> Any:
         """Up to ``steps`` frames in one compiled call: ``(state, views, dt, count) →
         (state, records)``.
 
@@ -196,7 +198,8 @@ class Simulation:
         pays that once per ``steps`` frames. The buffers are ``steps`` times one frame's
         record (:func:`record_shapes`), so a caller recording large frames picks a smaller
         ``steps``; they are reused from call to call (:class:`KSteps`): a call's records are
-        valid until the next call.
+        valid until the next call. ``shapes``: one frame's record as :func:`record_shapes`
+        gives it, if the caller has it (else the first call traces the step for it).
         """
         one = self._one_step()
 
@@ -215,7 +218,7 @@ class Simulation:
 
             return jax.lax.fori_loop(0, jnp.minimum(count, steps), body, (state, buffers))
 
-        return KSteps(_jit(run, donate, (1,)), advance, steps)
+        return KSteps(_jit(run, donate, (1,)), advance, steps, shapes)
 
 
 class KSteps:
@@ -228,10 +231,13 @@ class KSteps:
     (read them to the host first; arrays of an earlier call are deleted).
     """
 
-    def __init__(self, jitted: Any, advance: Callable[..., Any], steps: int) -> None:
+    def __init__(
+        self, jitted: Any, advance: Callable[..., Any], steps: int, shapes: Any = None
+    ) -> None:
         self._jitted = jitted
         self._advance = advance
         self._steps = steps
+        self._shapes = shapes
         self._buffers: Any = None
 
     def _fresh(self, state: CrowdState, views: CameraView, dt: jax.Array, count: Any) -> Any:
@@ -239,8 +245,10 @@ class KSteps:
         call, which takes the records back, has the first call's signature: no second
         compilation). One device: left uncommitted, as the step's own outputs are from an
         uncommitted state."""
-        first = jax.tree.map(lambda v: v[0], views)
-        shapes = jax.eval_shape(self._advance, state, first, dt)[1]
+        shapes = self._shapes
+        if shapes is None:
+            first = jax.tree.map(lambda v: v[0], views)
+            shapes = jax.eval_shape(self._advance, state, first, dt)[1]
         spec = jax.tree.map(
             lambda a: jax.ShapeDtypeStruct((self._steps, *a.shape), a.dtype), shapes
         )
