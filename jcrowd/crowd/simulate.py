@@ -167,6 +167,15 @@ class Simulation:
 
         return one
 
+    @functools.cached_property
+    def _traced_step(
+        self,
+    ) -> Callable[[CrowdState, CameraView, jax.Array], tuple[CrowdState, Frame]]:
+        """:meth:`_one_step` under one ``jit`` object kept with the simulation: inside the
+        compiled loops and :func:`record_shapes` it is traced once per argument shapes (jax
+        keeps the trace), where tracing the plain function each time would take seconds."""
+        return jax.jit(self._one_step())
+
     def compiled(self, donate: bool = True) -> Any:
         """``jit(step)`` with the model and settings closed over: ``(state, view, dt) → …``.
 
@@ -201,7 +210,7 @@ class Simulation:
         valid until the next call. ``shapes``: one frame's record as :func:`record_shapes`
         gives it, if the caller has it (else the first call traces the step for it).
         """
-        one = self._one_step()
+        one = self._traced_step
 
         def advance(s: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Any]:
             new, frame = one(s, view, dt)
@@ -284,7 +293,7 @@ start, camera, frame) → pytree of arrays``."""
 def record_shapes(sim: Simulation, state: CrowdState, record: Record) -> Any:
     """The shapes and dtypes (``jax.ShapeDtypeStruct``) ``record`` returns for one frame of
     ``sim`` from ``state``; nothing runs."""
-    one = sim._one_step()
+    one = sim._traced_step
 
     def frame(s: CrowdState, view: CameraView, dt: jax.Array) -> Any:
         return record(s, view, one(s, view, dt)[1])

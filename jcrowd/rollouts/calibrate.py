@@ -254,6 +254,13 @@ def _fn(y: Array, args: tuple[tuple[WindowBatch, ...], tuple[str, ...], str]) ->
 
 
 @eqx.filter_jit
+def _jacobian(y: Array, args: tuple[tuple[WindowBatch, ...], tuple[str, ...], str]) -> Array:
+    """``∂ residuals / ∂ log-parameters``, compiled once per batch shapes (run op by op, the
+    rollout's scan would compile anew at every call)."""
+    return jax.jacfwd(_fn)(y, args)
+
+
+@eqx.filter_jit
 def _rms(y: Array, args: tuple[tuple[WindowBatch, ...], tuple[str, ...], str]) -> Array:
     return jnp.sqrt(jnp.mean(_fn(y, args) ** 2))
 
@@ -304,7 +311,7 @@ def calibrate(
     best = int(np.argmin(np.where(np.isfinite(rms), rms, np.inf)))
     solver: Any = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     sol: Any = optx.least_squares(_fn, solver, ys[best], args, max_steps=max_steps, throw=False)
-    jac = jax.jacfwd(_fn)(sol.value, args)
+    jac = _jacobian(sol.value, args)
     return Calibration(
         names,
         x0,
