@@ -209,6 +209,7 @@ def decode_bucket(
         return fn(slots)
     pad = -cap % chunk
     ids = jnp.pad(slots, (0, pad))
+    fn = jax.jit(fn)  # traced once: for the shapes here, the trace reused in the loop below
     shapes = jax.eval_shape(fn, ids[:chunk])
     init = jax.tree.map(lambda s: jnp.zeros((cap + pad, *s.shape[1:]), s.dtype), shapes)
 
