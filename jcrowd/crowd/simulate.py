@@ -167,14 +167,18 @@ class Simulation:
 
         return one
 
-    @functools.cached_property
     def _traced_step(
         self,
     ) -> Callable[[CrowdState, CameraView, jax.Array], tuple[CrowdState, Frame]]:
-        """:meth:`_one_step` under one ``jit`` object kept with the simulation: inside the
-        compiled loops and :func:`record_shapes` it is traced once per argument shapes (jax
-        keeps the trace), where tracing the plain function each time would take seconds."""
-        return jax.jit(self._one_step())
+        """:meth:`_one_step` under one ``jit`` object per device set, kept with the simulation:
+        inside the compiled loops and :func:`record_shapes` it is traced once per argument
+        shapes (jax keeps the trace), where tracing the plain function each time takes
+        seconds."""
+        kept = self.__dict__.setdefault("_traced", {})
+        key = tuple(jax.devices())
+        if key not in kept:
+            kept[key] = jax.jit(self._one_step())
+        return kept[key]
 
     def compiled(self, donate: bool = True) -> Any:
         """``jit(step)`` with the model and settings closed over: ``(state, view, dt) → …``.
@@ -183,8 +187,15 @@ class Simulation:
         fields a step changes in place instead of copying the whole state, ~70 MB at 100k
         agents): the state passed in must not be used again; copy it first if it must
         (``jax.tree.map(jnp.copy, state)``).
+
+        One jitted function per simulation, ``donate`` and device set: calling this again
+        returns it, with what it compiled.
         """
-        return _jit(self._one_step(), donate)
+        kept = self.__dict__.setdefault("_compiled", {})
+        key = (donate, tuple(jax.devices()))
+        if key not in kept:
+            kept[key] = _jit(self._one_step(), donate)
+        return kept[key]
 
     def compiled_steps(
         self, steps: int, record: Record, donate: bool = True, shapes: Any = None
@@ -210,7 +221,7 @@ class Simulation:
         valid until the next call. ``shapes``: one frame's record as :func:`record_shapes`
         gives it, if the caller has it (else the first call traces the step for it).
         """
-        one = self._traced_step
+        one = self._traced_step()
 
         def advance(s: CrowdState, view: CameraView, dt: jax.Array) -> tuple[CrowdState, Any]:
             new, frame = one(s, view, dt)
@@ -293,7 +304,7 @@ start, camera, frame) → pytree of arrays``."""
 def record_shapes(sim: Simulation, state: CrowdState, record: Record) -> Any:
     """The shapes and dtypes (``jax.ShapeDtypeStruct``) ``record`` returns for one frame of
     ``sim`` from ``state``; nothing runs."""
-    one = sim._traced_step
+    one = sim._traced_step()
 
     def frame(s: CrowdState, view: CameraView, dt: jax.Array) -> Any:
         return record(s, view, one(s, view, dt)[1])
