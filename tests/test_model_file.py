@@ -9,16 +9,15 @@ import pytest
 from helpers import fully_optimised
 
 from jcrowd.errors import StoreError
-from jcrowd.io import load_dataset, load_motion_model, save_motion_model, save_tensor_model
-from jcrowd.model import TensorModelConfig, build_tensor_model, fit_motion_model, level_pose_vectors
+from jcrowd.io import load_motion_model, save_motion_model, save_tensor_model
+from jcrowd.model import TensorModel, fit_motion_model, level_pose_vectors
 
 
-def test_round_trip(cmu16_dir: Path, tmp_path: Path) -> None:
-    # A small fit (3 key levels, no per-level refit) keeps this test quick; the format does not
-    # depend on size or on how the levels were fitted.
-    config = TensorModelConfig(key_levels=3, level_fit="freeze")
+def test_round_trip(cmu16_tensor: TensorModel, tmp_path: Path) -> None:
+    # The run's shared cmu16 tensor fit (conftest), kriged here: the format does not depend on
+    # how the levels were fitted, and a fit of its own would cost this test most of a minute.
+    tensor = cmu16_tensor
     with fully_optimised():
-        tensor = build_tensor_model(load_dataset(cmu16_dir), config)
         model = fit_motion_model(tensor)
     path = tmp_path / "m.jcm"
     save_motion_model(path, model, extra={"note": "test"})
