@@ -98,7 +98,8 @@ def test_every_alive_agent_is_stored_or_counted(n, cell, seed):
     """Property: stored + overflow = alive, and an agent is stored at most once."""
     pos, alive = _crowd(n, seed, dead=0.3)
     spec = grid_spec((-5.0, -3.0), (5.0, 3.0), cell, max_density=2.0, headroom=1.0)
-    cl = cell_list(spec, jnp.asarray(pos), jnp.asarray(alive))
+    # Compiled (one program per example; op by op each example's new shapes compile every op).
+    cl = jax.jit(cell_list, static_argnums=0)(spec, jnp.asarray(pos), jnp.asarray(alive))
     stored = np.asarray(cl.order)
     stored = stored[stored < n]
     assert len(set(stored.tolist())) == len(stored)
