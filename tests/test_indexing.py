@@ -29,9 +29,10 @@ masks = st.lists(st.booleans(), min_size=1, max_size=300).map(np.asarray)
 @settings(max_examples=60, deadline=None)
 @given(masks, st.integers(1, 320), st.integers(-5, 400))
 def test_first_true_equals_flatnonzero_and_jnp_nonzero(mask, size, fill):
-    got = np.asarray(first_true(jnp.asarray(mask), size, fill))
+    # Compiled: one program per example (op by op, every op compiles for the new shapes).
+    got = np.asarray(jax.jit(first_true, static_argnums=(1, 2))(jnp.asarray(mask), size, fill))
     np.testing.assert_array_equal(got, _oracle(mask, size, fill))
-    (ref,) = jnp.nonzero(jnp.asarray(mask), size=size, fill_value=fill)
+    (ref,) = jax.jit(lambda m: jnp.nonzero(m, size=size, fill_value=fill))(jnp.asarray(mask))
     np.testing.assert_array_equal(got, np.asarray(ref))
     kept = got[: min(size, int(mask.sum()))]
     assert np.all(np.diff(kept) > 0) and np.all(mask[kept])
@@ -62,7 +63,8 @@ def test_first_true_jit_and_vmap():
     st.integers(-3, 300),
 )
 def test_first_true_per_class_equals_one_compaction_per_class(label, sizes, fill):
-    got = first_true_per_class(jnp.asarray(label, jnp.int32), tuple(sizes), fill)
+    per_class = jax.jit(first_true_per_class, static_argnums=(1, 2))  # one program per example
+    got = per_class(jnp.asarray(label, jnp.int32), tuple(sizes), fill)
     assert len(got) == len(sizes)
     for c, (size, idx) in enumerate(zip(sizes, got, strict=True)):
         np.testing.assert_array_equal(np.asarray(idx), _oracle(label == c, size, fill), str(c))
