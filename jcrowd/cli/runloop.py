@@ -87,7 +87,7 @@ class RunLoop:
         leaves = jax.tree.leaves(self.shapes)
         per_frame = sum(int(np.prod(a.shape)) * a.dtype.itemsize for a in leaves)
         self.chunk = max(1, min(CHUNK, RECORD_BYTES // max(1, per_frame)))
-        self.step = sim.compiled_steps(self.chunk, record, shapes=self.shapes)
+        self.step = sim.compiled_steps(self.chunk, record)
         self._counts = {n: on_all_devices(jnp.asarray(n, jnp.int32)) for n in range(self.chunk + 1)}
         t0 = time.perf_counter()
         warm = jax.tree.map(jnp.copy, state)  # the steps donate their input state

@@ -167,18 +167,22 @@ class Simulation:
 
         return one
 
+    def _kept(self, key: tuple[Any, ...], make: Callable[[], Any]) -> Any:
+        """``make()`` once per ``key`` and device set, kept with the simulation (a jitted
+        function keeps its traces and compilations: calling again reuses them)."""
+        kept = self.__dict__.setdefault("_kept_fns", {})
+        full = (*key, tuple(jax.devices()))
+        if full not in kept:
+            kept[full] = make()
+        return kept[full]
+
     def _traced_step(
         self,
     ) -> Callable[[CrowdState, CameraView, jax.Array], tuple[CrowdState, Frame]]:
-        """:meth:`_one_step` under one ``jit`` object per device set, kept with the simulation:
-        inside the compiled loops and :func:`record_shapes` it is traced once per argument
-        shapes (jax keeps the trace), where tracing the plain function each time takes
-        seconds."""
-        kept = self.__dict__.setdefault("_traced", {})
-        key = tuple(jax.devices())
-        if key not in kept:
-            kept[key] = jax.jit(self._one_step())
-        return kept[key]
+        """:meth:`_one_step` under one ``jit`` (:meth:`_kept`): inside the compiled loops and
+        :func:`record_shapes` it is traced once per argument shapes, where tracing the plain
+        function each time takes seconds."""
+        return self._kept(("traced",), lambda: jax.jit(self._one_step()))
 
     def compiled(self, donate: bool = True) -> Any:
         """``jit(step)`` with the model and settings closed over: ``(state, view, dt) → …``.
@@ -191,15 +195,9 @@ class Simulation:
         One jitted function per simulation, ``donate`` and device set: calling this again
         returns it, with what it compiled.
         """
-        kept = self.__dict__.setdefault("_compiled", {})
-        key = (donate, tuple(jax.devices()))
-        if key not in kept:
-            kept[key] = _jit(self._one_step(), donate)
-        return kept[key]
+        return self._kept(("compiled", donate), lambda: _jit(self._one_step(), donate))
 
-    def compiled_steps(
-        self, steps: int, record: Record, donate: bool = True, shapes: Any = None
-    ) -> Any:
+    def compiled_steps(self, steps: int, record: Record, donate: bool = True) -> Any:
         """Up to ``steps`` frames in one compiled call: ``(state, views, dt, count) →
         (state, records)``.
 
@@ -218,8 +216,7 @@ class Simulation:
         pays that once per ``steps`` frames. The buffers are ``steps`` times one frame's
         record (:func:`record_shapes`), so a caller recording large frames picks a smaller
         ``steps``; they are reused from call to call (:class:`KSteps`): a call's records are
-        valid until the next call. ``shapes``: one frame's record as :func:`record_shapes`
-        gives it, if the caller has it (else the first call traces the step for it).
+        valid until the next call.
         """
         one = self._traced_step()
 
@@ -238,7 +235,7 @@ class Simulation:
 
             return jax.lax.fori_loop(0, jnp.minimum(count, steps), body, (state, buffers))
 
-        return KSteps(_jit(run, donate, (1,)), advance, steps, shapes)
+        return KSteps(_jit(run, donate, (1,)), advance, steps)
 
 
 class KSteps:
@@ -251,13 +248,10 @@ class KSteps:
     (read them to the host first; arrays of an earlier call are deleted).
     """
 
-    def __init__(
-        self, jitted: Any, advance: Callable[..., Any], steps: int, shapes: Any = None
-    ) -> None:
+    def __init__(self, jitted: Any, advance: Callable[..., Any], steps: int) -> None:
         self._jitted = jitted
         self._advance = advance
         self._steps = steps
-        self._shapes = shapes
         self._buffers: Any = None
 
     def _fresh(self, state: CrowdState, views: CameraView, dt: jax.Array, count: Any) -> Any:
@@ -265,10 +259,8 @@ class KSteps:
         call, which takes the records back, has the first call's signature: no second
         compilation). One device: left uncommitted, as the step's own outputs are from an
         uncommitted state."""
-        shapes = self._shapes
-        if shapes is None:
-            first = jax.tree.map(lambda v: v[0], views)
-            shapes = jax.eval_shape(self._advance, state, first, dt)[1]
+        first = jax.tree.map(lambda v: v[0], views)
+        shapes = jax.eval_shape(self._advance, state, first, dt)[1]  # the step's trace reused
         spec = jax.tree.map(
             lambda a: jax.ShapeDtypeStruct((self._steps, *a.shape), a.dtype), shapes
         )
